@@ -1,0 +1,66 @@
+#pragma once
+/// \file image.hpp Float images, exemplars and EXR/PNG writing (OIIO behind it).
+#include <string>
+#include <vector>
+
+namespace lapflow {
+
+/// Interleaved float image, row 0 at the top, linear values.
+struct Image {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> pixels;  ///< width*height*channels
+
+  Image() = default;
+  Image(int w, int h, int c, float fill = 0.f)
+      : width(w), height(h), channels(c), pixels(std::size_t(w) * h * c, fill) {}
+  float& at(int x, int y, int c) { return pixels[(std::size_t(y) * width + x) * channels + c]; }
+  float at(int x, int y, int c) const { return pixels[(std::size_t(y) * width + x) * channels + c]; }
+  bool empty() const { return pixels.empty(); }
+};
+
+enum class ColorSpace { Auto, sRGB, Linear };
+
+/// Reads any image OIIO can (PNG, JPEG, TIFF, EXR; 8/16/32 bit) into linear
+/// float. With Auto, 8/16-bit integer files and files tagged sRGB are decoded
+/// from sRGB; float files are taken as linear. Data maps (feature, height)
+/// should be read with ColorSpace::Linear. Throws InputError.
+Image read_image(const std::string& path, ColorSpace space = ColorSpace::Auto);
+
+/// Resamples to a new size (bilinear, box-filtered when shrinking).
+Image resize_image(const Image& img, int width, int height);
+
+/// Bilinear sample at (u, v) in [0,1]^2, v = 0 at the image's bottom row (uv
+/// convention of the patches and the atlas), clamped at the borders.
+void sample_bilinear(const Image& img, double u, double v, float* out);
+
+enum class ExrPixelType { Half, Float };
+enum class ExrCompression { Piz, Zip, Dwaa, None };
+struct ExrOptions {
+  ExrPixelType type = ExrPixelType::Half;
+  ExrCompression compression = ExrCompression::Piz;
+};
+/// Writes an EXR with the given channel names (size == img.channels),
+/// atomically (temporary file, then rename). Throws OutputError.
+void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
+               const ExrOptions& options = {});
+/// Writes an 8-bit PNG (values clamped to [0,1], encoded to sRGB when
+/// `to_srgb`), atomically.
+void write_png(const std::string& path, const Image& img, bool to_srgb);
+
+/// The texture an artist supplies: colour E, feature map F_m in [0,1],
+/// displacement H. All three have the same size.
+struct Exemplar {
+  Image color;         ///< 3 channels, linear
+  Image feature;       ///< 1 channel in [0,1]
+  Image displacement;  ///< 1 channel; the feature map when none was given
+  std::string name;
+};
+
+/// Loads an exemplar. The feature and displacement maps are resampled to the
+/// colour image's size with a warning when their size differs; a different
+/// aspect ratio is an InputError. Values of the feature map outside [0,1] are
+/// an InputError.
+Exemplar load_exemplar(const std::string& color_path, const std::string& feature_path,
+                       const std::string& displacement_path = "");
+
+}  // namespace lapflow

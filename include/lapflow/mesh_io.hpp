@@ -1,0 +1,55 @@
+#pragma once
+/// \file mesh_io.hpp Reading fluid meshes and frame sequences.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/mesh.hpp"
+
+namespace lapflow {
+
+/// Reads one PLY (binary little/big endian or ASCII) or OBJ file. Polygons are
+/// triangulated (fan). Per-vertex velocity is read from PLY properties
+/// `vx vy vz`, `velocity_x/_y/_z` or `v_x/_y/_z` (float or double).
+/// Throws InputError naming the file and the offending element for a missing,
+/// truncated or malformed file, an index out of range, or a non-finite
+/// position or velocity. An empty mesh (no triangles) is legal.
+TriMesh read_mesh(const std::string& path);
+
+/// Writes a mesh as binary little-endian PLY with float x y z and, when the
+/// mesh has velocities, float vx vy vz (the layout of ../shared/data).
+/// Written atomically.
+void write_ply(const std::string& path, const TriMesh& m);
+
+/// Inclusive frame range `A-B` (or a single frame `A`).
+struct FrameRange {
+  int first = 1, last = 1;
+};
+/// Parses "A-B" or "A"; throws UsageError.
+FrameRange parse_frame_range(const std::string& text);
+
+/// A per-frame file name pattern. Accepted forms: `name.%04d.ply` (printf),
+/// `name.####.ply` (one # per digit), `name.$F4.ply` and `name.$F.ply`
+/// (Houdini). A pattern with no frame token is one file used
+/// for frame 1.
+class FramePattern {
+ public:
+  explicit FramePattern(std::string pattern);
+  const std::string& pattern() const { return pattern_; }
+  bool has_frame_token() const { return width_ >= 0; }
+  /// The file name for frame f.
+  std::string path(int frame) const;
+  /// Frames present on disk, sorted (matches any zero padding the token allows).
+  std::vector<int> frames_on_disk() const;
+
+ private:
+  std::string pattern_, prefix_, suffix_;
+  int width_ = -1;  ///< digits of zero padding; 0 = unpadded; -1 = no token
+};
+
+/// The frames to process: `range` if given (every frame in it must exist,
+/// else InputError naming the first missing file), else all found on disk
+/// (InputError when none).
+std::vector<int> resolve_frames(const FramePattern& pattern, const std::optional<FrameRange>& range);
+
+}  // namespace lapflow

@@ -1,0 +1,114 @@
+#pragma once
+/// \file patches.hpp Deformable texture patches (ALGORITHM.md steps 1-5): the
+/// Lagrangian half of the paper. Each stage is a free function over plain data.
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/mesh.hpp"
+#include "lapflow/surface_query.hpp"
+#include "lapflow/velocity.hpp"
+
+namespace lapflow {
+
+/// One texture patch: an open triangle mesh with its own topology, carrying
+/// rest uv coordinates into the exemplar ([0,1]^2, centre at (0.5, 0.5), uv
+/// distance 0.5 is about r on the surface).
+struct Patch {
+  uint32_t id = 0;          ///< stable, unique within a bake
+  int birth_frame = 0;      ///< its layer: older is on top, ties broken by id
+  Vec3 center;              ///< current 3D position of the creation point (metres)
+  Vec3 center_normal;       ///< surface normal at creation (unit)
+  Vec2 center_uv{0.5, 0.5};
+  std::vector<Vec3> positions;         ///< current 3D position per vertex (metres)
+  std::vector<Vec2> rest_uv;           ///< fixed at creation
+  std::vector<Tri> triangles;
+  std::vector<int32_t> surface_triangle;  ///< fluid triangle each vertex lies on this frame (-1 unknown)
+  std::vector<float> quality;          ///< Q_V in [0,1]
+  std::vector<uint8_t> border;         ///< B_V in {0,1}
+  std::vector<float> weight;           ///< w_V = Q_V * B_V
+  std::vector<float> triangle_quality; ///< Q_T per triangle
+  std::vector<float> triangle_delta;   ///< Sorkine distortion delta per triangle (inf if folded/degenerate)
+
+  bool alive() const { return !triangles.empty(); }
+  std::size_t vertex_count() const { return positions.size(); }
+};
+
+/// Patches in stack order: oldest first (birth_frame, then id). The rasterizer
+/// walks them in this order; hole filling appends at the bottom.
+struct PatchSet {
+  std::vector<Patch> patches;
+  uint32_t next_id = 0;
+};
+
+/// A point on the fluid surface.
+struct SurfacePoint {
+  Vec3 position;
+  Vec3 normal;  ///< unit
+  int triangle = -1;
+};
+
+struct PatchOptions {
+  double radius = 0.1;            ///< r in metres: the exemplar spans 2r on the surface
+  bool remesh = true;             ///< isotropic remeshing of each new patch before flattening
+  double remesh_edge = 1.0 / 6;   ///< target edge length as a fraction of r
+  /// Orientation: random angle from hash(seed, patch id) unless `align` is
+  /// set, in which case u follows `align_direction` projected on the tangent plane.
+  bool align = false;
+  Vec3 align_direction{1, 0, 0};
+  uint64_t seed = 0;
+};
+
+struct SeedOptions {
+  double spacing = 1.0;  ///< Poisson-disk minimum distance as a multiple of r
+};
+
+struct AdvectOptions {
+  double dt = 1.0 / 24;            ///< seconds between frames
+  double max_step_fraction = 0.25; ///< sub-step so that |v| * h <= fraction * r
+  double max_projection = 0.25;    ///< remove vertices moved farther than this * r by projection
+};
+
+struct WeightOptions {
+  double delta_max = 3.0;        ///< distortion at which Q_T reaches 0
+  double center_radius = 0.125;  ///< rest-uv distance from (0.5,0.5) where B_V = 1 on the boundary
+};
+
+/// Poisson-disk samples on the surface, minimum Euclidean distance
+/// `spacing * radius`, deterministic for a seed at any thread count; every
+/// connected component large enough to hold a sample gets one.
+std::vector<SurfacePoint> seed_points(const TriMesh& mesh, double min_distance, uint64_t seed);
+
+/// Creates a patch at `at` (ALGORITHM.md steps 2-3 and initial weights), or
+/// nothing when the surface there cannot hold one (degenerate). The new patch
+/// gets id `id` and birth frame `frame`.
+std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfacePoint& at, uint32_t id, int frame,
+                                  const PatchOptions& options, const WeightOptions& weights);
+
+/// First frame: seeds the whole surface and creates one patch per sample.
+void seed_patches(const SurfaceQuery& surface, int frame, const PatchOptions& options, const SeedOptions& seeding,
+                  const WeightOptions& weights, PatchSet& patches);
+
+struct AdvectStats {
+  std::size_t vertices_moved = 0, vertices_removed = 0, triangles_removed = 0, patches_removed = 0;
+  double max_residual = 0;  ///< largest distance of a kept vertex to the surface after projection (metres)
+};
+
+/// ALGORITHM.md step 4: moves every patch vertex and centre with the velocity
+/// from frame f-1 (field `v_prev`, surface at time t) to frame f (`v_next`,
+/// t + dt) by midpoint RK2, sub-stepped, then projects onto `next`; removes
+/// what moved too far, isolated vertices and patches left with no triangle.
+AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev, const VelocityField& v_next,
+                           const PatchOptions& patch_options, const AdvectOptions& options,
+                           const WeightOptions& weights, PatchSet& patches);
+
+/// ALGORITHM.md step 5: Q_T, Q_V, B_V, w_V of one patch against the surface
+/// normals of `surface` (for the fold test).
+void patch_weights(const TriMesh& surface, double radius, const WeightOptions& options, Patch& patch);
+
+/// Writes all patches as one binary PLY with per-vertex `patch_id`, `u`, `v`,
+/// `w` and per-face `patch_id` (atomically).
+void write_patches_ply(const std::string& path, const PatchSet& patches);
+
+}  // namespace lapflow

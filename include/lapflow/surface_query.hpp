@@ -1,0 +1,47 @@
+#pragma once
+/// \file surface_query.hpp Closest-point and ray queries on a frame's surface
+/// (Embree 3 behind a pimpl: no Embree type leaks out).
+#include <memory>
+
+#include "lapflow/mesh.hpp"
+
+namespace lapflow {
+
+struct ClosestHit {
+  bool found = false;
+  int triangle = -1;    ///< index into the mesh's triangles
+  Vec3 point;           ///< closest point, refined in double precision
+  double b1 = 0, b2 = 0;  ///< barycentric of vertices 1 and 2 (vertex 0 gets 1-b1-b2)
+  double distance = 0;  ///< |query - point| in metres
+};
+
+struct RayHit {
+  bool found = false;
+  int triangle = -1;
+  double t = 0, b1 = 0, b2 = 0;
+};
+
+/// Acceleration structure over one TriMesh. The mesh must outlive the query.
+/// Thread-safe for concurrent queries once built.
+class SurfaceQuery {
+ public:
+  explicit SurfaceQuery(const TriMesh& mesh);
+  ~SurfaceQuery();
+  SurfaceQuery(const SurfaceQuery&) = delete;
+  SurfaceQuery& operator=(const SurfaceQuery&) = delete;
+
+  const TriMesh& mesh() const { return mesh_; }
+  /// Closest surface point within max_distance (metres; infinity = unbounded).
+  /// Ties between equidistant triangles go to the lowest triangle index, so
+  /// the answer does not depend on traversal order.
+  ClosestHit closest(const Vec3& p, double max_distance) const;
+  /// First hit along origin + t*dir for t in [t_min, t_max].
+  RayHit intersect(const Vec3& origin, const Vec3& dir, double t_min, double t_max) const;
+
+ private:
+  struct Impl;
+  const TriMesh& mesh_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace lapflow

@@ -1,0 +1,45 @@
+#pragma once
+/// \file velocity.hpp Velocity fields that can be sampled anywhere near the surface.
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "lapflow/mesh.hpp"
+#include "lapflow/surface_query.hpp"
+
+namespace lapflow {
+
+/// Velocity in m/s at a point in metres. Must be thread-safe.
+using VelocityField = std::function<Vec3(const Vec3&)>;
+
+/// Per-vertex velocities of `query.mesh()` interpolated barycentrically at
+/// the closest surface point. The query (and its mesh) must outlive the field.
+VelocityField vertex_velocity_field(const SurfaceQuery& query);
+
+/// Zero below `min_speed` (m/s): real solvers leave a few cm/s of noise on
+/// liquid at rest, which would make a texture creep.
+VelocityField with_min_speed(VelocityField field, double min_speed);
+
+/// A vector grid read from an OpenVDB file, sampled trilinearly in world space.
+class VelocityGrid {
+ public:
+  /// Reads grid `grid_name` from `path`; an empty name tries `vel`, `v`,
+  /// `velocity` in that order. Throws InputError when the file cannot be read
+  /// or has no such vector grid (naming the grids it does have).
+  VelocityGrid(const std::string& path, const std::string& grid_name = "");
+  ~VelocityGrid();
+  VelocityGrid(VelocityGrid&&) noexcept;
+  VelocityGrid& operator=(VelocityGrid&&) noexcept;
+  Vec3 sample(const Vec3& p) const;
+  const std::string& grid_name() const;
+  Box3 active_bounds() const;  ///< world-space bounds of the active voxels
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Field backed by a grid; the grid must outlive the field.
+VelocityField grid_velocity_field(const VelocityGrid& grid);
+
+}  // namespace lapflow

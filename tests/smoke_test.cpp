@@ -1,0 +1,6 @@
+#include <gtest/gtest.h>
+#include "lapflow/parallel.hpp"
+TEST(Hash, IsDeterministicAndSpreads) {
+  EXPECT_EQ(lapflow::hash64(1, 2, 3), lapflow::hash64(1, 2, 3));
+  EXPECT_NE(lapflow::hash64(1, 2, 3), lapflow::hash64(1, 2, 4));
+}

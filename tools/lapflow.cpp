@@ -1,0 +1,47 @@
+// lapflow: deformable lapped textures on animated liquid surfaces.
+// The command line: parse, validate, call the library. Exit codes: 0 ok,
+// 2 bad input or usage, 1 internal error.
+#include <exception>
+#include <new>
+
+#include "cli_common.hpp"
+#include "lapflow/errors.hpp"
+
+int main(int argc, char** argv) {
+  using namespace lapflow;
+  CLI::App app{
+      "lapflow covers an animated liquid surface (a new mesh every frame plus a velocity field) with small\n"
+      "deformable texture patches that ride the flow, erodes each patch where it gets too distorted, and\n"
+      "bakes every frame into an EXR colour + displacement atlas and a UV mesh any renderer can load.\n"
+      "Method: Gagnon, Guzman, Mould, Paquette, \"Patch Erosion for Deformable Lapped Textures on 3D\n"
+      "Fluids\" (2021).",
+      "lapflow"};
+  app.require_subcommand(1);
+  app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  app.set_version_flag("--version", "lapflow 0.1.0");
+  app.footer("Run 'lapflow <command> --help' for a command's options.\nExit codes: 0 ok, 2 bad input or usage, 1 internal error.");
+  cli::add_demo_command(app);
+  cli::add_inspect_command(app);
+  cli::add_atlas_command(app);
+  cli::add_patches_command(app);
+  cli::add_bake_command(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? cli::kOk : cli::kBadInput;
+  } catch (const InputError& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return cli::kBadInput;
+  } catch (const UsageError& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return cli::kBadInput;
+  } catch (const std::bad_alloc&) {
+    fmt::print(stderr, "error: out of memory\n");
+    return cli::kInternal;
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return cli::kInternal;
+  }
+  return cli::kOk;
+}
