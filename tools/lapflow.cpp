@@ -1,10 +1,14 @@
 // lapflow: deformable lapped textures on animated liquid surfaces.
 // The command line: parse, validate, call the library. Exit codes: 0 ok,
 // 2 bad input or usage, 1 internal error.
+#include <algorithm>
 #include <exception>
+#include <string>
+#include <vector>
 #include <new>
 
 #include "cli_common.hpp"
+#include "scene_file.hpp"
 #include "lapflow/errors.hpp"
 
 int main(int argc, char** argv) {
@@ -26,7 +30,12 @@ int main(int argc, char** argv) {
   cli::add_patches_command(app);
   cli::add_bake_command(app);
   try {
-    app.parse(argc, argv);
+    // `lapflow bake scene.toml [options]`: the file's keys become options
+    // placed before the user's, so the command line overrides the file.
+    std::vector<std::string> args(argv + 1, argv + argc);
+    cli::expand_scene_files(args);
+    std::reverse(args.begin(), args.end());  // CLI11 takes the vector in reverse order
+    app.parse(args);
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);
     return code == 0 ? cli::kOk : cli::kBadInput;

@@ -1,0 +1,90 @@
+#include "scene_file.hpp"
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <filesystem>
+
+#include "lapflow/errors.hpp"
+
+namespace lapflow::cli {
+namespace fs = std::filesystem;
+
+bool is_path_option(const std::string& key) {
+  static const char* keys[] = {"mesh", "exemplar", "feature", "displacement", "out", "velocity-vdb"};
+  return std::any_of(std::begin(keys), std::end(keys), [&](const char* k) { return key == k; });
+}
+
+namespace {
+
+std::string scalar_text(const toml::node& node, const std::string& file, const std::string& key) {
+  if (auto s = node.value<std::string>()) return *s;
+  if (node.is_integer()) return std::to_string(*node.value<int64_t>());
+  if (node.is_floating_point()) {
+    std::string t = std::to_string(*node.value<double>());
+    return t;
+  }
+  if (node.is_boolean()) return *node.value<bool>() ? "true" : "false";
+  throw InputError(file, "key '" + key + "': expected a string, number or boolean");
+}
+
+void add_table(const toml::table& table, const std::string& file, const fs::path& base,
+               std::vector<std::string>& out) {
+  for (const auto& [k, node] : table) {
+    std::string key(k.str());
+    std::replace(key.begin(), key.end(), '_', '-');
+    if (node.is_table()) continue;  // sections are handled by the caller
+    auto emit = [&](const toml::node& value) {
+      std::string text = scalar_text(value, file, key);
+      if (value.is_boolean()) {
+        out.push_back(text == "true" ? "--" + key : "--" + key + "=false");
+        return;
+      }
+      if (is_path_option(key) && !text.empty() && fs::path(text).is_relative()) text = (base / text).string();
+      out.push_back("--" + key + "=" + text);
+    };
+    if (const toml::array* arr = node.as_array()) {
+      for (const toml::node& v : *arr) emit(v);
+    } else {
+      emit(node);
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<std::string> scene_file_arguments(const std::string& path) {
+  if (!fs::exists(path)) throw InputError(path, "scene file not found");
+  toml::table table;
+  try {
+    table = toml::parse_file(path);
+  } catch (const toml::parse_error& e) {
+    throw InputError(path, "line " + std::to_string(e.source().begin.line) + ": " + std::string(e.description()));
+  }
+  const fs::path base = fs::path(path).parent_path();
+  std::vector<std::string> out;
+  add_table(table, path, base, out);
+  if (const toml::table* bake = table["bake"].as_table()) add_table(*bake, path, base, out);
+  return out;
+}
+
+void expand_scene_files(std::vector<std::string>& args) {
+  if (args.empty()) return;
+  std::vector<std::string> scene_args, rest;
+  for (std::size_t i = 1; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a.size() > 5 && a.rfind(".toml") == a.size() - 5 && a[0] != '-') {
+      auto expanded = scene_file_arguments(a);
+      scene_args.insert(scene_args.end(), expanded.begin(), expanded.end());
+    } else {
+      rest.push_back(a);
+    }
+  }
+  if (scene_args.empty()) return;
+  std::vector<std::string> result{args[0]};
+  result.insert(result.end(), scene_args.begin(), scene_args.end());
+  result.insert(result.end(), rest.begin(), rest.end());
+  args = std::move(result);
+}
+
+}  // namespace lapflow::cli
