@@ -4,6 +4,10 @@
 
 #include <cstdio>
 
+#include <filesystem>
+#include <regex>
+
+#include "lapflow/errors.hpp"
 #include "lapflow/parallel.hpp"
 
 namespace lapflow::cli {
@@ -56,6 +60,76 @@ void Progress::finish() {
   if (finished_) return;
   finished_ = true;
   if (tty_ && !globals().quiet && done_ > 0) fmt::print(stderr, "\n");
+}
+
+namespace fs = std::filesystem;
+
+std::string exemplar_dir() {
+  // Beside the binary's source tree (build/lapflow -> exemplars/), else the
+  // folder compiled in.
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    for (fs::path p : {exe.parent_path().parent_path() / "exemplars", exe.parent_path() / "exemplars"})
+      if (fs::is_directory(p)) return p.string();
+  }
+  return LAPFLOW_EXEMPLAR_DIR;
+}
+
+namespace {
+std::string find_sibling(const fs::path& dir, const std::string& stem) {
+  for (const char* ext : {".png", ".exr", ".tif", ".tiff", ".jpg", ".jpeg"}) {
+    const fs::path p = dir / (stem + ext);
+    if (fs::exists(p)) return p.string();
+  }
+  return "";
+}
+}  // namespace
+
+void resolve_exemplar_paths(std::string& color, std::string& feature, std::string& displacement) {
+  if (color.empty()) throw UsageError("--exemplar is required (a colour image or a shipped exemplar's name)");
+  if (!fs::exists(color) && color.find('/') == std::string::npos && color.find('.') == std::string::npos) {
+    const std::string shipped = find_sibling(exemplar_dir(), color + ".color");
+    if (shipped.empty())
+      throw InputError(color, "no such file, and no shipped exemplar of that name in " + exemplar_dir());
+    color = shipped;
+  }
+  if (!fs::exists(color)) throw InputError(color, "exemplar image not found");
+  // NAME.color.EXT -> NAME; otherwise the file's stem.
+  const fs::path path(color);
+  std::string stem = path.stem().string();
+  if (stem.size() > 6 && stem.substr(stem.size() - 6) == ".color") stem = stem.substr(0, stem.size() - 6);
+  if (feature.empty()) {
+    feature = find_sibling(path.parent_path(), stem + ".feature");
+    if (feature.empty())
+      throw InputError(color, "no feature map given (--feature) and no " + stem +
+                                  ".feature.png beside the exemplar; make one with any grey image in [0,1]");
+  }
+  if (displacement.empty()) displacement = find_sibling(path.parent_path(), stem + ".disp");
+}
+
+std::string default_output_name(const std::string& mesh_pattern) {
+  std::string name = fs::path(mesh_pattern).filename().string();
+  // Drop the extension and the frame token with its separator.
+  name = std::regex_replace(name, std::regex(R"(\.[A-Za-z]+$)"), "");
+  name = std::regex_replace(name, std::regex(R"([._-]?(%0?\d*d|#+|\$F\d?)$)"), "");
+  return name.empty() ? "lapflow" : name;
+}
+
+bool parse_orientation(const std::string& text, lapflow::Vec3& direction) {
+  if (text == "random") return false;
+  std::smatch m;
+  static const std::regex world(R"(world:\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+))");
+  if (!std::regex_match(text, m, world))
+    throw UsageError("--orientation: expected 'random' or 'world:x,y,z', got '" + text + "'");
+  direction = {std::stod(m[1]), std::stod(m[2]), std::stod(m[3])};
+  if (!(lapflow::norm(direction) > 0)) throw UsageError("--orientation: the direction must not be zero");
+  return true;
+}
+
+std::string thread_count_label() {
+  return globals().threads > 0 ? std::to_string(globals().threads)
+                               : "all (" + std::to_string(lapflow::thread_count()) + ")";
 }
 
 }  // namespace lapflow::cli

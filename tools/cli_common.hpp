@@ -9,6 +9,8 @@
 #include <functional>
 #include <string>
 
+#include "lapflow/vec.hpp"
+
 namespace lapflow::cli {
 
 enum ExitCode { kOk = 0, kInternal = 1, kBadInput = 2 };
@@ -52,6 +54,20 @@ class Progress {
   bool tty_, finished_ = false;
   std::chrono::steady_clock::time_point start_;
 };
+
+/// Fills the feature and displacement paths of an exemplar: `color` may be a
+/// shipped exemplar's name (`pebbles`) or a file `NAME.color.EXT`; missing
+/// maps default to `NAME.feature.*` / `NAME.disp.*` beside it when present.
+/// Throws InputError when no feature map can be found.
+void resolve_exemplar_paths(std::string& color, std::string& feature, std::string& displacement);
+/// Folder of the shipped exemplars.
+std::string exemplar_dir();
+/// `dam_break` for `/data/dam_break.%04d.ply`.
+std::string default_output_name(const std::string& mesh_pattern);
+/// "random" -> false; "world:x,y,z" -> true and the direction. Throws UsageError.
+bool parse_orientation(const std::string& text, lapflow::Vec3& direction);
+/// "2" or "all (2)".
+std::string thread_count_label();
 
 /// Each command file adds its subcommand with one of these.
 void add_inspect_command(CLI::App& app);
