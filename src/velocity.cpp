@@ -1,1 +1,29 @@
-// placeholder: filled by its stage's work
+// Per-vertex velocities sampled anywhere near the surface.
+#include "lapflow/velocity.hpp"
+
+namespace lapflow {
+
+VelocityField vertex_velocity_field(const SurfaceQuery& query) {
+  const TriMesh& mesh = query.mesh();
+  // A mesh without velocities (or without triangles) moves nothing; the
+  // caller decides whether that is acceptable (--allow-zero-velocity).
+  if (!mesh.has_velocities() || mesh.empty()) return [](const Vec3&) { return Vec3{}; };
+  return [&query, &mesh](const Vec3& p) {
+    const ClosestHit hit = query.closest(p, INFINITY);
+    if (!hit.found) return Vec3{};
+    const Tri& f = mesh.triangles[hit.triangle];
+    const double b0 = 1.0 - hit.b1 - hit.b2;
+    return mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
+  };
+}
+
+VelocityField with_min_speed(VelocityField field, double min_speed) {
+  if (!(min_speed > 0)) return field;
+  const double min2 = min_speed * min_speed;
+  return [field = std::move(field), min2](const Vec3& p) {
+    const Vec3 v = field(p);
+    return norm2(v) < min2 ? Vec3{} : v;
+  };
+}
+
+}  // namespace lapflow
