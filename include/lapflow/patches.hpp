@@ -80,9 +80,24 @@ struct WeightOptions {
 /// connected component large enough to hold a sample gets one.
 std::vector<SurfacePoint> seed_points(const TriMesh& mesh, double min_distance, uint64_t seed);
 
+/// Vertex -> triangle adjacency of one frame's mesh (CSR), which patch
+/// creation walks. Build it once per frame when creating many patches.
+struct SurfaceAdjacency {
+  std::vector<int32_t> offsets;    ///< vertex_count + 1 entries
+  std::vector<int32_t> triangles;  ///< triangles around each vertex, ascending
+};
+SurfaceAdjacency build_surface_adjacency(const TriMesh& mesh);
+
 /// Creates a patch at `at` (ALGORITHM.md steps 2-3 and initial weights), or
-/// nothing when the surface there cannot hold one (degenerate). The new patch
-/// gets id `id` and birth frame `frame`.
+/// nothing when the surface there cannot hold one (degenerate triangle, or a
+/// patch LSCM cannot flatten). The new patch gets id `id` and birth frame
+/// `frame`. `at.triangle` < 0 is looked up by closest point; a zero
+/// `at.normal` takes the normal of that triangle. `adjacency` must be built
+/// from `surface.mesh()`. Thread-safe.
+std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
+                                  const SurfacePoint& at, uint32_t id, int frame, const PatchOptions& options,
+                                  const WeightOptions& weights);
+/// The same, building the adjacency on the fly (O(mesh size) per call).
 std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfacePoint& at, uint32_t id, int frame,
                                   const PatchOptions& options, const WeightOptions& weights);
 

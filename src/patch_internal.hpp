@@ -1,0 +1,56 @@
+#pragma once
+// Internal pieces of the patch stages (seed, create, flatten, advect, weights)
+// shared between their translation units and the tests. Not public API.
+#include <vector>
+
+#include "lapflow/patches.hpp"
+#include "lapflow/vec.hpp"
+
+namespace lapflow::detail {
+
+/// A small open triangle mesh in plain arrays (a patch before it gets uv).
+struct PatchMesh {
+  std::vector<Vec3> positions;
+  std::vector<Tri> triangles;
+};
+
+/// Least-squares conformal map (Levy et al. 2002) solved with Eigen: `uv`
+/// gets one coordinate per vertex; vertices `pin_a` and `pin_b` are pinned at
+/// `uv_a` and `uv_b` (pins < 0: two far-apart border vertices chosen here, at
+/// (0,0) and (their 3D distance, 0)). The energy is that of holomorphic maps,
+/// so triangles counter-clockwise in 3D stay counter-clockwise in uv (up to
+/// the rare flip LSCM allows). Returns false when the system is singular (no uv written). The mesh
+/// must be edge-connected.
+bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
+                  Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
+
+/// The conformal energy LSCM minimizes (sum over triangles of area times the
+/// squared Cauchy-Riemann residual), in uv units squared.
+double lscm_energy(const PatchMesh& mesh, const std::vector<Vec2>& uv);
+
+/// The same map computed by CGAL's LSCM_parameterizer_3 with
+/// Two_vertices_parameterizer_3(pin_a, pin_b), which places the pins at (0,0.5)
+/// and (1,0.5). For tests that the Eigen solver agrees with CGAL.
+bool cgal_lscm_flatten(const PatchMesh& mesh, int pin_a, int pin_b, std::vector<Vec2>& uv);
+
+/// CGAL isotropic remeshing with target edge length `target_edge` (metres),
+/// vertices projected back on the input; border edges are constrained (split
+/// and collapsed along the border only). Returns false (mesh untouched) when
+/// CGAL cannot take the mesh (not a valid manifold polygon mesh).
+bool cgal_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
+
+/// Duplicates every vertex whose incident triangles form several fans
+/// (edge-connected groups around it), so the mesh becomes manifold at vertices.
+/// Requires every edge to have at most two consistently oriented triangles.
+void split_nonmanifold_vertices(PatchMesh& mesh);
+
+/// Closest point on triangle (a,b,c) to p, as barycentric (of b and c).
+Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double& b1, double& b2);
+
+/// Per-triangle distortion of the map rest uv (scaled by `scale`) -> 3D:
+/// singular values s1 >= s2 of its Jacobian; returns delta = max(s1, 1/s2),
+/// +inf when either triangle is degenerate.
+double triangle_distortion(const Vec2& u0, const Vec2& u1, const Vec2& u2, const Vec3& p0, const Vec3& p1,
+                           const Vec3& p2, double scale, double* s1 = nullptr, double* s2 = nullptr);
+
+}  // namespace lapflow::detail

@@ -1,0 +1,98 @@
+// Poisson-disk seeding (ALGORITHM.md step 1).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "lapflow/parallel.hpp"
+#include "lapflow/patches.hpp"
+#include "test_helpers.hpp"
+
+using namespace lapflow;
+
+namespace {
+
+double min_pair_distance(const std::vector<SurfacePoint>& s) {
+  double best = INFINITY;
+  for (std::size_t i = 0; i < s.size(); ++i)
+    for (std::size_t j = i + 1; j < s.size(); ++j) best = std::min(best, norm(s[i].position - s[j].position));
+  return best;
+}
+
+// Largest distance from a dense set of surface points (vertices and
+// centroids) to the nearest sample.
+double coverage_radius(const TriMesh& m, const std::vector<SurfacePoint>& s) {
+  std::vector<Vec3> probes = m.positions;
+  for (const Tri& f : m.triangles) probes.push_back((m.positions[f[0]] + m.positions[f[1]] + m.positions[f[2]]) / 3.0);
+  double worst = 0;
+  for (const Vec3& p : probes) {
+    double best = INFINITY;
+    for (const SurfacePoint& q : s) best = std::min(best, norm2(q.position - p));
+    worst = std::max(worst, std::sqrt(best));
+  }
+  return worst;
+}
+
+}  // namespace
+
+TEST(PatchesSeed, RespectsMinimumDistanceAndCoversTheSurface) {
+  const TriMesh sphere = test::icosphere(4, 1.0);
+  const double d = 0.15;
+  const auto samples = seed_points(sphere, d, 7);
+  // 4 pi / d^2 = 558: random sequential packing holds about 0.7 of that.
+  EXPECT_GT(samples.size(), 300u);
+  EXPECT_LT(samples.size(), 600u);
+  EXPECT_GE(min_pair_distance(samples), d);
+  EXPECT_LE(coverage_radius(sphere, samples), 2 * d);
+  // A maximal sampling leaves no point farther than d (up to the probes' spacing).
+  EXPECT_LE(coverage_radius(sphere, samples), 1.05 * d);
+  for (const SurfacePoint& s : samples) {
+    ASSERT_GE(s.triangle, 0);
+    EXPECT_NEAR(norm(s.normal), 1.0, 1e-12);
+    EXPECT_GT(dot(s.normal, s.position), 0.9);  // outward face normal of a unit sphere
+  }
+}
+
+TEST(PatchesSeed, IsScaleInvariant) {
+  TriMesh a = test::plane_grid(30, 20, 3.0, 2.0);
+  TriMesh b = a;
+  const double k = 7.3;
+  for (Vec3& p : b.positions) p = p * k;
+  const auto sa = seed_points(a, 0.2, 3), sb = seed_points(b, 0.2 * k, 3);
+  ASSERT_EQ(sa.size(), sb.size());
+  for (std::size_t i = 0; i < sa.size(); ++i) {
+    EXPECT_EQ(sa[i].triangle, sb[i].triangle);
+    EXPECT_LT(norm(sa[i].position * k - sb[i].position), 1e-9 * k);
+  }
+}
+
+TEST(PatchesSeed, EveryComponentGetsASampleAndDistanceIsPerComponent) {
+  TriMesh m = test::icosphere(3, 1.0);
+  // A droplet much smaller than the spacing, 0.05 from the body.
+  const TriMesh drop = test::icosphere(1, 0.02, {1.07, 0, 0});
+  const int base = int(m.positions.size());
+  m.positions.insert(m.positions.end(), drop.positions.begin(), drop.positions.end());
+  for (Tri f : drop.triangles) m.triangles.push_back({f[0] + base, f[1] + base, f[2] + base});
+  const int body_triangles = 20 * 64;
+  const auto s = seed_points(m, 0.3, 11);
+  int on_drop = 0;
+  for (const SurfacePoint& p : s) on_drop += p.triangle >= body_triangles;
+  EXPECT_EQ(on_drop, 1);
+  std::vector<SurfacePoint> body;
+  for (const SurfacePoint& p : s)
+    if (p.triangle < body_triangles) body.push_back(p);
+  EXPECT_GE(min_pair_distance(body), 0.3);
+}
+
+TEST(PatchesSeed, SameSamplesForAnyThreadCountAndDifferentForAnotherSeed) {
+  const TriMesh sphere = test::icosphere(4, 1.0);
+  set_thread_count(1);
+  const auto one = seed_points(sphere, 0.1, 5);
+  set_thread_count(2);
+  const auto two = seed_points(sphere, 0.1, 5);
+  set_thread_count(0);
+  ASSERT_EQ(one.size(), two.size());
+  for (std::size_t i = 0; i < one.size(); ++i) EXPECT_EQ(one[i].position, two[i].position);
+  const auto other = seed_points(sphere, 0.1, 6);
+  EXPECT_NE(other.front().position, one.front().position);
+}
