@@ -1,0 +1,224 @@
+// Every malformed input gets one InputError naming the file, the element and
+// what is wrong; legal oddities (an empty frame) are not errors.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/errors.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/velocity.hpp"
+
+using namespace lapflow;
+using lapflow::test::TempDir;
+
+namespace {
+
+/// Runs `f`, expects an InputError for `file` whose message contains every
+/// one of `parts`; returns the message.
+std::string expect_input_error(const std::function<void()>& f, const std::string& file,
+                               std::initializer_list<std::string> parts) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(e.file(), file) << what;
+    EXPECT_NE(what.find(file), std::string::npos) << what;
+    for (const std::string& p : parts) EXPECT_NE(what.find(p), std::string::npos) << "'" << p << "' not in: " << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << "one line: " << what;
+    return what;
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "expected InputError, got: " << e.what();
+    return "";
+  }
+  ADD_FAILURE() << "expected InputError for " << file << ", nothing thrown";
+  return "";
+}
+
+/// A binary LE PLY in the layout of ../shared/data with `nv` declared
+/// vertices, of which the data holds `nv_data`, and the given faces.
+std::string tetra_ply(long declared_vertices, long declared_faces, const std::vector<Vec3>& pos,
+                      const std::vector<Vec3>& vel, const std::vector<Tri>& faces) {
+  std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(declared_vertices) +
+                  "\nproperty float x\nproperty float y\nproperty float z\n"
+                  "property float vx\nproperty float vy\nproperty float vz\n"
+                  "element face " + std::to_string(declared_faces) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (std::size_t i = 0; i < pos.size(); ++i) {
+    for (int k = 0; k < 3; ++k) test::append_raw(s, float(pos[i][k]));
+    for (int k = 0; k < 3; ++k) test::append_raw(s, float(vel[i][k]));
+  }
+  for (const Tri& f : faces) {
+    test::append_raw(s, uint8_t(3));
+    for (int32_t x : f) test::append_raw(s, x);
+  }
+  return s;
+}
+
+const std::vector<Vec3> kPos = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+const std::vector<Vec3> kVel = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+const std::vector<Tri> kFaces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+
+}  // namespace
+
+TEST(BadInput, ValidTetraPlyReads) {
+  // The baseline every corruption below starts from.
+  TempDir tmp("bad");
+  test::write_bytes(tmp / "ok.ply", tetra_ply(4, 4, kPos, kVel, kFaces));
+  const TriMesh m = read_mesh(tmp / "ok.ply");
+  EXPECT_EQ(m.vertex_count(), 4u);
+  EXPECT_EQ(m.triangles, kFaces);
+}
+
+TEST(BadInput, TruncatedBinaryPlyNamesWhereTheDataEnds) {
+  TempDir tmp("bad");
+  const std::string full = tetra_ply(4, 4, kPos, kVel, kFaces);
+  // Cut inside face 2 (each face is 13 bytes after 4 * 24 vertex bytes).
+  test::write_bytes(tmp / "cut.ply", full.substr(0, full.size() - 13 - 5));
+  expect_input_error([&] { read_mesh(tmp / "cut.ply"); }, tmp / "cut.ply", {"truncated", "face 2 of 4"});
+  // Cut inside the vertices.
+  test::write_bytes(tmp / "cut2.ply", full.substr(0, full.find("end_header\n") + 11 + 24 + 10));
+  expect_input_error([&] { read_mesh(tmp / "cut2.ply"); }, tmp / "cut2.ply", {"truncated", "vertex 1 of 4"});
+  // Cut inside the header.
+  test::write_bytes(tmp / "cut3.ply", full.substr(0, 60));
+  expect_input_error([&] { read_mesh(tmp / "cut3.ply"); }, tmp / "cut3.ply", {"end_header"});
+}
+
+TEST(BadInput, PlyHeaderLyingAboutCounts) {
+  TempDir tmp("bad");
+  // Promises more vertices than there are: the faces are eaten as vertices
+  // and the data ends early.
+  test::write_bytes(tmp / "more.ply", tetra_ply(6, 4, kPos, kVel, kFaces));
+  expect_input_error([&] { read_mesh(tmp / "more.ply"); }, tmp / "more.ply", {"truncated"});
+  // Promises fewer faces than there are: geometry would be silently lost.
+  test::write_bytes(tmp / "fewer.ply", tetra_ply(4, 2, kPos, kVel, kFaces));
+  expect_input_error([&] { read_mesh(tmp / "fewer.ply"); }, tmp / "fewer.ply", {"after the last element", "counts"});
+  // ASCII: one face line missing.
+  test::write_bytes(tmp / "ascii.ply",
+                    "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  expect_input_error([&] { read_mesh(tmp / "ascii.ply"); }, tmp / "ascii.ply", {"truncated", "face 1 of 2"});
+}
+
+TEST(BadInput, NonFiniteVelocityOrPositionNamesTheVertex) {
+  TempDir tmp("bad");
+  std::vector<Vec3> vel = kVel;
+  vel[2].y = std::numeric_limits<double>::quiet_NaN();
+  test::write_bytes(tmp / "nan.ply", tetra_ply(4, 4, kPos, vel, kFaces));
+  expect_input_error([&] { read_mesh(tmp / "nan.ply"); }, tmp / "nan.ply", {"vertex 2", "velocity is NaN"});
+  vel = kVel;
+  vel[3].z = INFINITY;
+  test::write_bytes(tmp / "inf.ply", tetra_ply(4, 4, kPos, vel, kFaces));
+  expect_input_error([&] { read_mesh(tmp / "inf.ply"); }, tmp / "inf.ply", {"vertex 3", "velocity is infinite"});
+  std::vector<Vec3> pos = kPos;
+  pos[1].x = -INFINITY;
+  test::write_bytes(tmp / "pinf.ply", tetra_ply(4, 4, pos, kVel, kFaces));
+  expect_input_error([&] { read_mesh(tmp / "pinf.ply"); }, tmp / "pinf.ply", {"vertex 1", "position is infinite"});
+}
+
+TEST(BadInput, PlyFaceIndexOutOfRange) {
+  TempDir tmp("bad");
+  std::vector<Tri> faces = kFaces;
+  faces[3][1] = 7;
+  test::write_bytes(tmp / "idx.ply", tetra_ply(4, 4, kPos, kVel, faces));
+  expect_input_error([&] { read_mesh(tmp / "idx.ply"); }, tmp / "idx.ply", {"face 3", "vertex index 7", "out of range"});
+  faces = kFaces;
+  faces[1][0] = -1;
+  test::write_bytes(tmp / "neg.ply", tetra_ply(4, 4, kPos, kVel, faces));
+  expect_input_error([&] { read_mesh(tmp / "neg.ply"); }, tmp / "neg.ply", {"face 1", "vertex index -1"});
+}
+
+TEST(BadInput, PlyMagicFormatAndHeader) {
+  TempDir tmp("bad");
+  test::write_bytes(tmp / "magic.ply", "PLY\nformat ascii 1.0\nend_header\n");
+  expect_input_error([&] { read_mesh(tmp / "magic.ply"); }, tmp / "magic.ply", {"not a PLY file"});
+  test::write_bytes(tmp / "fmt.ply", "ply\nformat binary_middle_endian 1.0\nelement vertex 0\nend_header\n");
+  expect_input_error([&] { read_mesh(tmp / "fmt.ply"); }, tmp / "fmt.ply", {"line 2", "unknown format"});
+  test::write_bytes(tmp / "type.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n");
+  expect_input_error([&] { read_mesh(tmp / "type.ply"); }, tmp / "type.ply", {"line 4", "unknown type 'float128'"});
+  test::write_bytes(tmp / "novel.ply",
+                    "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                    "property float vx\nend_header\n0 0 0 1\n");
+  expect_input_error([&] { read_mesh(tmp / "novel.ply"); }, tmp / "novel.ply", {"velocity is incomplete"});
+  test::write_bytes(tmp / "word.ply",
+                    "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                    "end_header\n0 zero 0\n");
+  expect_input_error([&] { read_mesh(tmp / "word.ply"); }, tmp / "word.ply", {"line 8", "vertex 0", "'zero' is not a number"});
+}
+
+TEST(BadInput, ObjOutOfRangeAndMalformedLines) {
+  TempDir tmp("bad");
+  test::write_bytes(tmp / "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 9\n");
+  expect_input_error([&] { read_mesh(tmp / "range.obj"); }, tmp / "range.obj", {"line 5", "vertex index 9", "out of range"});
+  test::write_bytes(tmp / "rel.obj", "v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n");
+  expect_input_error([&] { read_mesh(tmp / "rel.obj"); }, tmp / "rel.obj", {"line 3", "vertex index -3"});
+  test::write_bytes(tmp / "zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+  expect_input_error([&] { read_mesh(tmp / "zero.obj"); }, tmp / "zero.obj", {"line 4", "index 0"});
+  test::write_bytes(tmp / "v.obj", "v 0 0 0\nv 1 0\n");
+  expect_input_error([&] { read_mesh(tmp / "v.obj"); }, tmp / "v.obj", {"line 2", "malformed vertex"});
+  test::write_bytes(tmp / "f.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x3\n");
+  expect_input_error([&] { read_mesh(tmp / "f.obj"); }, tmp / "f.obj", {"line 4", "malformed face", "'x3'"});
+  test::write_bytes(tmp / "nan.obj", "v 0 0 0\nv nan 0 0\n");
+  expect_input_error([&] { read_mesh(tmp / "nan.obj"); }, tmp / "nan.obj", {"line 2", "vertex 1", "NaN"});
+  test::write_bytes(tmp / "bin.obj", std::string("v 0 0 0\n\x01\x02\x03 junk\n", 17));
+  expect_input_error([&] { read_mesh(tmp / "bin.obj"); }, tmp / "bin.obj", {"line 2", "malformed line"});
+}
+
+TEST(BadInput, MissingUnreadableAndUnknownFiles) {
+  TempDir tmp("bad");
+  expect_input_error([&] { read_mesh(tmp / "nothing.ply"); }, tmp / "nothing.ply", {"file not found"});
+  std::filesystem::create_directory(tmp / "dir.ply");
+  expect_input_error([&] { read_mesh(tmp / "dir.ply"); }, tmp / "dir.ply", {"is a directory"});
+  test::write_bytes(tmp / "mesh.stl", "solid x\nendsolid x\n");
+  expect_input_error([&] { read_mesh(tmp / "mesh.stl"); }, tmp / "mesh.stl", {"unknown mesh format '.stl'"});
+  if (::geteuid() != 0) {  // root reads anything
+    test::write_bytes(tmp / "locked.ply", "ply\n");
+    std::filesystem::permissions(tmp / "locked.ply", std::filesystem::perms::none);
+    expect_input_error([&] { read_mesh(tmp / "locked.ply"); }, tmp / "locked.ply", {"cannot open"});
+  }
+}
+
+TEST(BadInput, MissingFrameInsideARangeNamesFileAndFrame) {
+  TempDir tmp("bad");
+  for (int f : {1, 2, 4}) write_ply(FramePattern(tmp / "s.%04d.ply").path(f), TriMesh{});
+  const FramePattern p(tmp / "s.%04d.ply");
+  try {
+    resolve_frames(p, FrameRange{1, 4});
+    ADD_FAILURE() << "missing frame 3 not reported";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), tmp / "s.0003.ply");
+    EXPECT_EQ(e.frame(), 3);
+    EXPECT_NE(std::string(e.what()).find("frame 3"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(resolve_frames(p, std::nullopt), (std::vector<int>{1, 2, 4}));
+  expect_input_error([&] { resolve_frames(FramePattern(tmp / "none.%04d.ply"), std::nullopt); },
+                     tmp / "none.%04d.ply", {"no file matches"});
+}
+
+TEST(BadInput, EmptyFrameIsLegalAndReported) {
+  TempDir tmp("bad");
+  // Header-only file: no liquid left in this frame.
+  test::write_bytes(tmp / "empty.ply",
+                    "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                    "property float z\nproperty float vx\nproperty float vy\nproperty float vz\nelement face 0\n"
+                    "property list uchar int vertex_indices\nend_header\n");
+  const TriMesh m = read_mesh(tmp / "empty.ply");
+  EXPECT_TRUE(m.empty());
+  const MeshReport r = analyze_mesh(m);
+  EXPECT_EQ(r.triangles, 0u);
+  EXPECT_EQ(r.components, 0);
+  EXPECT_TRUE(r.bounds.empty());
+}
+
+TEST(BadInput, VdbWithoutTheNamedGridListsTheGridsItHas) {
+  TempDir tmp("bad");
+  expect_input_error([&] { VelocityGrid(tmp / "none.vdb"); }, tmp / "none.vdb", {"file not found"});
+  test::write_bytes(tmp / "junk.vdb", "this is not an OpenVDB file, just text long enough to be read");
+  expect_input_error([&] { VelocityGrid(tmp / "junk.vdb"); }, tmp / "junk.vdb", {"cannot read OpenVDB file"});
+  const std::string dir = test::shared_data_dir();
+  if (dir.empty()) GTEST_SKIP() << "../shared/data is absent: VDB grid-name test skipped";
+  const std::string vdb = dir + "/dam_break/dam_break.0001.vdb";
+  expect_input_error([&] { VelocityGrid(vdb, "vel"); }, vdb, {"no vector grid named 'vel'", "velocity (vec3s)"});
+  EXPECT_EQ(VelocityGrid(vdb).grid_name(), "velocity");  // found by the default search
+}

@@ -1,0 +1,81 @@
+#pragma once
+// Helpers for the input-side tests (readers, bad input, inspect): scratch
+// folders, raw file bytes, running the CLI.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstring>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "lapflow/mesh.hpp"
+
+namespace lapflow::test {
+
+/// A fresh folder under the system temp dir, removed with everything in it.
+class TempDir {
+ public:
+  explicit TempDir(const std::string& tag) {
+    static std::atomic<int> counter{0};
+    path_ = std::filesystem::temp_directory_path() /
+            ("lapflow_" + tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    std::filesystem::remove_all(path_);
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  /// Path of `name` inside the folder.
+  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+  std::string str() const { return path_.string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+inline void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+inline std::string read_bytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+/// Appends the raw bytes of a value in the host (little-endian) order, or
+/// swapped for big-endian files.
+template <typename T>
+void append_raw(std::string& out, T v, bool big_endian = false) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  if (big_endian) std::reverse(b, b + sizeof(T));
+  out.append(b, sizeof(T));
+}
+
+/// Runs a shell command with stdout and stderr captured; returns its exit code.
+inline int run_command(const std::string& cmd, std::string* out, std::string* err, const TempDir& scratch) {
+  const std::string o = scratch / "cmd.stdout", e = scratch / "cmd.stderr";
+  const int status = std::system((cmd + " >'" + o + "' 2>'" + e + "'").c_str());
+  if (out) *out = read_bytes(o);
+  if (err) *err = read_bytes(e);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/// The shared Mantaflow data folder, or "" when it is absent.
+inline std::string shared_data_dir() {
+  const std::string dir = LAPFLOW_SOURCE_DIR "/../shared/data";
+  return std::filesystem::is_directory(dir + "/dam_break") ? dir : std::string();
+}
+
+}  // namespace lapflow::test
