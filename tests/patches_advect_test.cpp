@@ -1,0 +1,250 @@
+// Advection, projection and weights of patches (ALGORITHM.md steps 4-5).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <set>
+
+#include "lapflow/parallel.hpp"
+#include "lapflow/patches.hpp"
+#include "patch_internal.hpp"
+#include "test_helpers.hpp"
+
+using namespace lapflow;
+
+namespace {
+
+// The 3D point that rest uv `q` maps to (NaN when no triangle holds it).
+Vec3 point_at_uv(const Patch& p, const Vec2& q) {
+  for (const Tri& f : p.triangles) {
+    const Vec2 a = p.rest_uv[f[0]], b = p.rest_uv[f[1]], c = p.rest_uv[f[2]];
+    const double area = cross(b - a, c - a);
+    const double l1 = cross(q - a, c - a) / area, l2 = cross(b - a, q - a) / area;
+    if (l1 >= -1e-9 && l2 >= -1e-9 && l1 + l2 <= 1 + 1e-9)
+      return p.positions[f[0]] * (1 - l1 - l2) + p.positions[f[1]] * l1 + p.positions[f[2]] * l2;
+  }
+  return {NAN, NAN, NAN};
+}
+
+double brute_force_distance(const TriMesh& m, const Vec3& p) {
+  double best = INFINITY;
+  for (const Tri& f : m.triangles) {
+    double b1, b2;
+    const Vec3 q = detail::closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]], b1, b2);
+    best = std::min(best, norm(q - p));
+  }
+  return best;
+}
+
+// A unit sphere translating with velocity V and spinning at omega about its
+// centre, re-meshed every frame (the icosphere under a different random
+// rotation, so no vertex lines up with the previous frame's).
+struct RigidSphere {
+  Vec3 c0{0.2, -0.1, 0.3}, V{0.6, 0.2, -0.3}, axis = normalized(Vec3{0.3, 1, 0.2});
+  double omega = 1.5;  // rad/s
+  Vec3 centre(double t) const { return c0 + V * t; }
+  // Exact flow of a point that was at x0 at time 0.
+  Vec3 flow(const Vec3& x0, double t) const { return centre(t) + test::rotate(x0 - c0, axis, omega * t); }
+  VelocityField velocity(double t) const {
+    return [this, t](const Vec3& x) { return V + cross(axis * omega, x - centre(t)); };
+  }
+  TriMesh mesh(int frame) const {
+    TriMesh m = test::icosphere(5, 1.0);
+    const Vec3 a = normalized(Vec3{hash_to_unit(hash64(frame, 1)) - 0.5, hash_to_unit(hash64(frame, 2)) - 0.5,
+                                   hash_to_unit(hash64(frame, 3)) - 0.5});
+    const double angle = 6.28 * hash_to_unit(hash64(frame, 4));
+    const Vec3 c = centre(frame / 24.0);
+    for (Vec3& p : m.positions) p = c + test::rotate(p, a, angle);
+    return m;
+  }
+};
+
+struct RigidRun {
+  PatchSet patches;
+  std::vector<Vec3> start_centres;
+  std::size_t removed = 0;
+  double max_residual = 0;
+  TriMesh last;
+};
+
+RigidRun run_rigid(int frames, const PatchOptions& po) {
+  RigidSphere s;
+  RigidRun run;
+  auto mesh = std::make_unique<TriMesh>(s.mesh(0));
+  auto query = std::make_unique<SurfaceQuery>(*mesh);
+  seed_patches(*query, 0, po, {}, {}, run.patches);
+  for (const Patch& p : run.patches.patches) run.start_centres.push_back(p.center);
+  AdvectOptions ao;
+  ao.dt = 1.0 / 24;
+  for (int f = 1; f <= frames; ++f) {
+    auto next_mesh = std::make_unique<TriMesh>(s.mesh(f));
+    auto next_query = std::make_unique<SurfaceQuery>(*next_mesh);
+    const AdvectStats st = advect_patches(*next_query, s.velocity((f - 1) / 24.0), s.velocity(f / 24.0), po, ao, {},
+                                          run.patches);
+    run.removed += st.vertices_removed;
+    run.max_residual = std::max(run.max_residual, st.max_residual);
+    query = std::move(next_query);
+    mesh = std::move(next_mesh);
+  }
+  run.last = *mesh;
+  return run;
+}
+
+}  // namespace
+
+TEST(PatchesAdvect, RigidMotionKeepsPatchesUndistorted) {
+  PatchOptions po;
+  po.radius = 0.3;
+  po.seed = 4;
+  const int frames = 48;
+  const RigidRun run = run_rigid(frames, po);
+  ASSERT_GT(run.patches.patches.size(), 50u);
+  EXPECT_EQ(run.removed, 0u);
+  RigidSphere s;
+  double worst_delta = 0, worst_centre = 0;
+  for (std::size_t i = 0; i < run.patches.patches.size(); ++i) {
+    const Patch& p = run.patches.patches[i];
+    for (float d : p.triangle_delta) worst_delta = std::max(worst_delta, double(d));
+    const Vec3 exact = s.flow(run.start_centres[i], frames / 24.0);
+    // The centre of the texture rides with the surface: exact flow, projected.
+    const Vec3 on_surface = s.centre(frames / 24.0) + normalized(exact - s.centre(frames / 24.0));
+    worst_centre = std::max(worst_centre, norm(point_at_uv(p, {0.5, 0.5}) - on_surface));
+    worst_centre = std::max(worst_centre, norm(p.center - exact));
+  }
+  EXPECT_LT(worst_delta, 1.05);
+  EXPECT_LT(worst_centre, po.radius / 100);
+  // Projection residual of every kept vertex (a sample checked by brute force).
+  EXPECT_LT(run.max_residual, 1e-5 * po.radius);
+  for (std::size_t i = 0; i < run.patches.patches.size(); i += 7)
+    for (const Vec3& x : run.patches.patches[i].positions)
+      EXPECT_LT(brute_force_distance(run.last, x), 1e-5 * po.radius);
+}
+
+TEST(PatchesAdvect, SameResultForOneAndTwoThreads) {
+  PatchOptions po;
+  po.radius = 0.4;
+  set_thread_count(1);
+  const RigidRun one = run_rigid(3, po);
+  set_thread_count(2);
+  const RigidRun two = run_rigid(3, po);
+  set_thread_count(0);
+  ASSERT_EQ(one.patches.patches.size(), two.patches.patches.size());
+  for (std::size_t i = 0; i < one.patches.patches.size(); ++i) {
+    const Patch &a = one.patches.patches[i], &b = two.patches.patches[i];
+    EXPECT_EQ(a.id, b.id);
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.rest_uv, b.rest_uv);
+    EXPECT_EQ(a.triangles, b.triangles);
+    EXPECT_EQ(a.weight, b.weight);
+    EXPECT_EQ(a.surface_triangle, b.surface_triangle);
+  }
+}
+
+TEST(PatchesAdvect, SimpleShearMatchesTheAnalyticDistortion) {
+  // The vertical plane y = 0, sheared by u = (g z, 0, 0): every material
+  // triangle undergoes [[1, g t], [0, 1]] in the (x, z) plane.
+  TriMesh plane = test::plane_grid(60, 60, 2.0, 2.0);
+  for (Vec3& p : plane.positions) p = {p.x - 1, 0, p.y - 1};
+  SurfaceQuery q(plane);
+  PatchOptions po;
+  po.radius = 0.2;
+  po.remesh = true;
+  PatchSet set;
+  for (int k = 0; k < 3; ++k) {
+    auto p = create_patch(q, {{0.1 * k - 0.1, 0, 0.05 * k}, {0, -1, 0}, -1}, uint32_t(k), 0, po, {});
+    ASSERT_TRUE(p);
+    set.patches.push_back(std::move(*p));
+  }
+  const double g = 1.0;
+  const VelocityField shear = [g](const Vec3& x) { return Vec3{g * x.z, 0, 0}; };
+  AdvectOptions ao;
+  ao.dt = 1.0 / 24;
+  const int frames = 12;
+  std::size_t removed = 0;
+  for (int f = 1; f <= frames; ++f) removed += advect_patches(q, shear, shear, po, ao, {}, set).vertices_removed;
+  EXPECT_EQ(removed, 0u);
+  const double k = g * frames * ao.dt;
+  const double s1 = std::sqrt((2 + k * k + k * std::sqrt(k * k + 4)) / 2);
+  for (const Patch& p : set.patches)
+    for (float d : p.triangle_delta) EXPECT_NEAR(d, s1, 0.01 * s1);
+  // Quality follows: Q_T = (3 - delta) / 2.
+  EXPECT_NEAR(set.patches[0].triangle_quality[0], (3 - s1) / 2, 0.01);
+}
+
+TEST(PatchesAdvect, VerticesThatLeaveTheSurfaceAreRemoved) {
+  // Frame 0: the plane z = 0 over [0, 2] x [0, 1]. Frame 1: the half x > 1
+  // has pinched off and dropped by r (a droplet leaving), with no velocity
+  // to follow it. A vertex at x > 1 + r/4 is then farther than r/4 from the
+  // new surface and must go; every other vertex stays.
+  const double r = 0.18;  // r/4 falls between grid lines: no vertex on the threshold
+  const TriMesh before = test::plane_grid(80, 40, 2.0, 1.0);
+  TriMesh after = test::plane_grid(40, 40, 1.0, 1.0);
+  TriMesh drop = test::plane_grid(40, 40, 1.0, 1.0, -r);
+  const int base = int(after.positions.size());
+  for (const Vec3& p : drop.positions) after.positions.push_back(p + Vec3{1.0, 0, 0});
+  for (Tri f : drop.triangles) after.triangles.push_back({f[0] + base, f[1] + base, f[2] + base});
+  SurfaceQuery q0(before), q1(after);
+  PatchOptions po;
+  po.radius = r;
+  po.remesh = true;
+  PatchSet set;
+  // One patch across the cut, one on the part that stays, one on the droplet.
+  for (const Vec3& c : {Vec3{1.0, 0.5, 0}, Vec3{0.4, 0.5, 0}, Vec3{1.6, 0.5, 0}}) {
+    auto p = create_patch(q0, {c, {0, 0, 1}, -1}, set.next_id++, 0, po, {});
+    ASSERT_TRUE(p);
+    set.patches.push_back(std::move(*p));
+  }
+  const PatchSet start = set;
+  const VelocityField still = [](const Vec3&) { return Vec3{}; };
+  const AdvectStats st = advect_patches(q1, still, still, po, {}, {}, set);
+  ASSERT_EQ(set.patches.size(), 2u);  // the droplet's patch is gone
+  EXPECT_EQ(st.patches_removed, 1u);
+  EXPECT_EQ(set.patches[0].id, 0u);
+  EXPECT_EQ(set.patches[1].id, 1u);
+  ASSERT_EQ(set.patches[1].positions.size(), start.patches[1].positions.size());  // untouched
+  for (std::size_t v = 0; v < start.patches[1].positions.size(); ++v)
+    EXPECT_LT(norm(set.patches[1].positions[v] - start.patches[1].positions[v]), 1e-12);
+  // The patch across the cut keeps exactly the triangles whose vertices stay
+  // (vertices are identified by their rest uv).
+  const Patch& a = start.patches[0];
+  std::vector<uint8_t> stays(a.positions.size());
+  for (std::size_t v = 0; v < stays.size(); ++v) stays[v] = a.positions[v].x <= 1 + r / 4 + 1e-12;
+  std::set<std::pair<double, double>> expected;
+  for (const Tri& f : a.triangles)
+    if (stays[f[0]] && stays[f[1]] && stays[f[2]])
+      for (int k = 0; k < 3; ++k) expected.insert({a.rest_uv[f[k]].x, a.rest_uv[f[k]].y});
+  const Patch& b = set.patches[0];
+  std::set<std::pair<double, double>> got;
+  for (const Vec2& uv : b.rest_uv) got.insert({uv.x, uv.y});
+  EXPECT_EQ(got, expected);
+  for (std::size_t v = 0; v < a.positions.size(); ++v)
+    if (expected.count({a.rest_uv[v].x, a.rest_uv[v].y}) && !got.count({a.rest_uv[v].x, a.rest_uv[v].y}))
+      ADD_FAILURE() << "lost vertex at " << a.positions[v].x << " " << a.positions[v].y << " " << a.positions[v].z;
+  EXPECT_LT(got.size(), a.positions.size());
+  for (const Vec3& x : b.positions) {
+    EXPECT_LE(x.x, 1.0 + 1e-12);
+    EXPECT_LT(brute_force_distance(after, x), 1e-5 * r);
+  }
+  // The cut is a new border: those vertices weigh 0 unless near the centre.
+  int zero = 0;
+  for (std::size_t v = 0; v < b.positions.size(); ++v)
+    if (b.positions[v].x > 0.999 && norm(b.rest_uv[v] - Vec2{0.5, 0.5}) > 0.125) zero += b.weight[v] == 0;
+  EXPECT_GT(zero, 0);
+}
+
+TEST(PatchesWeights, FoldedTriangleHasZeroQuality) {
+  const TriMesh plane = test::plane_grid(20, 20, 1.0, 1.0);
+  SurfaceQuery q(plane);
+  PatchOptions po;
+  po.radius = 0.2;
+  po.remesh = false;
+  auto p = create_patch(q, {{0.5, 0.5, 0}, {0, 0, 1}, -1}, 0, 0, po, {});
+  ASSERT_TRUE(p);
+  for (float w : p->triangle_quality) EXPECT_NEAR(w, 1.0, 1e-6);
+  // Reverse one triangle in 3D: it now faces against the fluid.
+  std::swap(p->positions[p->triangles[0][1]], p->positions[p->triangles[0][2]]);
+  patch_weights(plane, po.radius, {}, *p);
+  EXPECT_EQ(p->triangle_quality[0], 0.f);
+  EXPECT_FALSE(std::isfinite(p->triangle_delta[0]));
+}
