@@ -1,1 +1,451 @@
-// placeholder: filled by its stage's work
+// Lapped rasterization (ALGORITHM.md step 7) without a per-texel patch search:
+// every patch triangle is drawn in atlas space and each chart texel keeps the
+// smallest key (patch index << 32 | triangle) whose erosion test passes, by an
+// atomic min, so the winner is the oldest non-eroded patch whatever the
+// drawing order or thread count. A resolve pass then samples the exemplar for
+// each texel's winner; hole filling, retirement and gutter dilation follow.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "lapflow/parallel.hpp"
+#include "lapflow/raster.hpp"
+#include "raster_internal.hpp"
+#include "raster_sampling.hpp"
+
+namespace lapflow {
+namespace detail {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Atlas pixel coordinates of 3D point p through fluid triangle `tri`'s affine
+// map (p projected on the triangle's plane, barycentrics unclamped so points
+// just off the triangle extrapolate smoothly). Texel centres are integers:
+// X = u N - 0.5, Y = (1 - v) N - 0.5 (atlas.hpp's convention).
+bool to_pixels(const RasterContext& ctx, int tri, const Vec3& p, Vec2& out) {
+  const Tri& T = ctx.mesh.triangles[tri];
+  const Vec3& A = ctx.mesh.positions[T[0]];
+  const Vec3 e0 = ctx.mesh.positions[T[1]] - A, e1 = ctx.mesh.positions[T[2]] - A, e2 = p - A;
+  const double d00 = dot(e0, e0), d01 = dot(e0, e1), d11 = dot(e1, e1), d20 = dot(e2, e0), d21 = dot(e2, e1);
+  const double den = d00 * d11 - d01 * d01;
+  if (!(den > 1e-14 * d00 * d11)) return false;
+  const double b1 = (d11 * d20 - d01 * d21) / den, b2 = (d00 * d21 - d01 * d20) / den;
+  const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(tri) * 3];
+  const Vec2 uv = cu[0] + (cu[1] - cu[0]) * b1 + (cu[2] - cu[0]) * b2;
+  out = {uv.x * ctx.N - 0.5, (1.0 - uv.y) * ctx.N - 0.5};
+  return std::isfinite(out.x) && std::isfinite(out.y);
+}
+
+int vertex_triangle(const RasterContext& ctx, const Patch& patch, int v) {
+  int s = v < int(patch.surface_triangle.size()) ? patch.surface_triangle[v] : -1;
+  if (s >= int(ctx.mesh.triangles.size())) s = -1;
+  if (s < 0 && ctx.locate && *ctx.locate) s = (*ctx.locate)(patch.positions[v]);
+  return s;
+}
+
+inline float vertex_weight(const Patch& patch, int v) {
+  return patch.weight.size() == patch.positions.size() ? patch.weight[v] : 1.f;
+}
+
+// Barycentric coordinates of pixel centre (x, y) in pixel-space triangle P.
+struct Bary {
+  Vec2 p0, e1, e2;
+  double inv_area = 0;
+  bool init(const Vec2 P[3]) {
+    p0 = P[0];
+    e1 = P[1] - P[0];
+    e2 = P[2] - P[0];
+    const double a = cross(e1, e2);
+    if (!(std::abs(a) > 1e-12)) return false;
+    inv_area = 1.0 / a;
+    return true;
+  }
+  void at(double x, double y, double& l0, double& l1, double& l2) const {
+    const Vec2 d{x - p0.x, y - p0.y};
+    l1 = cross(d, e2) * inv_area;
+    l2 = cross(e1, d) * inv_area;
+    l0 = 1.0 - l1 - l2;
+  }
+};
+
+// Tolerance on barycentrics so that texel centres on a shared edge are never
+// lost to round-off (a duplicate is harmless: the atomic min picks one).
+constexpr double kInsideTol = 1e-9;
+
+// Draws one patch triangle (pixel positions P) into the texels accepted by
+// `accept(texel index)`, inside the clip box; erosion is the discard.
+template <class Accept>
+void draw_triangle(RasterContext& ctx, const Vec2 P[3], const Vec2 uv[3], const float w[3], uint64_t key, int cx0,
+                   int cy0, int cx1, int cy1, Accept&& accept) {
+  Bary b;
+  if (!b.init(P)) return;
+  const int x0 = std::max(cx0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
+  const int x1 = std::min(cx1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
+  const int y0 = std::max(cy0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
+  const int y1 = std::min(cy1, int(std::floor(std::max({P[0].y, P[1].y, P[2].y}) + 1e-7)));
+  const std::size_t N = std::size_t(ctx.N);
+  for (int y = y0; y <= y1; ++y) {
+    const int32_t* row = &ctx.index[std::size_t(y) * N];
+    for (int x = x0; x <= x1; ++x) {
+      const int32_t idx = row[x];
+      if (idx < 0) continue;
+      double l0, l1, l2;
+      b.at(x, y, l0, l1, l2);
+      if (l0 < -kInsideTol || l1 < -kInsideTol || l2 < -kInsideTol) continue;
+      std::atomic_ref<uint64_t> slot(ctx.keys[idx]);
+      uint64_t cur = slot.load(std::memory_order_relaxed);
+      if (cur <= key) continue;  // an older patch (or this one) already keeps it
+      if (!accept(idx)) continue;
+      const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
+      const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
+      const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
+      if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
+      while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
+      }
+    }
+  }
+}
+
+// Pixel positions of patch triangle vertices through fluid triangle F.
+bool pixels_through(const RasterContext& ctx, const Patch& patch, const Tri& t, int F, Vec2 P[3]) {
+  for (int k = 0; k < 3; ++k)
+    if (!to_pixels(ctx, F, patch.positions[t[k]], P[k])) return false;
+  return true;
+}
+
+struct PatchTriGeometry {
+  Vec3 centre, normal;
+  double radius = 0, margin = 0;
+};
+
+PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
+  const Vec3 &a = patch.positions[t[0]], &b = patch.positions[t[1]], &c = patch.positions[t[2]];
+  PatchTriGeometry g;
+  g.centre = (a + b + c) / 3.0;
+  g.normal = normalized(cross(b - a, c - a));
+  g.radius = std::sqrt(std::max({norm2(a - g.centre), norm2(b - g.centre), norm2(c - g.centre)}));
+  // The patch triangle is a chord of the curved surface: allow texels up to
+  // half its longest edge off its plane.
+  g.margin = 0.5 * std::sqrt(std::max({norm2(b - a), norm2(c - b), norm2(a - c)})) + 1e-12;
+  return g;
+}
+
+// Seam fallback: the fluid triangles near the patch triangle (walk over shared
+// vertices from its vertices' triangles, bounded by its bounding sphere plus a
+// margin), each drawn through its own affine map into its own texels.
+void draw_seam_triangle(RasterContext& ctx, const Patch& patch, int ti, const int vtri[3], uint64_t key,
+                        std::vector<int32_t>& found) {
+  const Tri& t = patch.triangles[ti];
+  const PatchTriGeometry g = patch_tri_geometry(patch, t);
+  if (norm2(g.normal) == 0) return;
+  found.clear();
+  for (int k = 0; k < 3; ++k)
+    if (vtri[k] >= 0 && std::find(found.begin(), found.end(), vtri[k]) == found.end()) found.push_back(vtri[k]);
+  constexpr std::size_t kMaxWalk = 4096;  // guard against pathological meshes
+  for (std::size_t q = 0; q < found.size() && found.size() < kMaxWalk; ++q) {
+    const Tri& ft = ctx.mesh.triangles[found[q]];
+    for (int k = 0; k < 3; ++k)
+      for (int32_t j = ctx.vt_offset[ft[k]]; j < ctx.vt_offset[ft[k] + 1]; ++j) {
+        const int32_t g2 = ctx.vt_list[j];
+        if (std::find(found.begin(), found.end(), g2) != found.end()) continue;
+        if (norm(ctx.tri_centroid[g2] - g.centre) > g.radius + ctx.tri_radius[g2] + g.margin) continue;
+        found.push_back(g2);
+      }
+  }
+  const auto& tm = ctx.atlas.texels;
+  for (const int32_t F : found) {
+    if (dot(ctx.tri_normal[F], g.normal) <= 0) continue;  // the other side of a thin sheet
+    Vec2 P[3];
+    if (!pixels_through(ctx, patch, t, F, P)) continue;
+    const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(F) * 3];
+    double fx0 = 1e300, fx1 = -1e300, fy0 = 1e300, fy1 = -1e300;
+    for (int k = 0; k < 3; ++k) {
+      const double X = cu[k].x * ctx.N - 0.5, Y = (1.0 - cu[k].y) * ctx.N - 0.5;
+      fx0 = std::min(fx0, X), fx1 = std::max(fx1, X), fy0 = std::min(fy0, Y), fy1 = std::max(fy1, Y);
+    }
+    const int cx0 = std::max(0, int(std::floor(fx0))), cx1 = std::min(ctx.N - 1, int(std::ceil(fx1)));
+    const int cy0 = std::max(0, int(std::floor(fy0))), cy1 = std::min(ctx.N - 1, int(std::ceil(fy1)));
+    if (cx0 > cx1 || cy0 > cy1) continue;
+    const Tri& FT = ctx.mesh.triangles[F];
+    const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
+    const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
+    draw_triangle(ctx, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
+      if (tm.triangle[idx] != F) return false;
+      const double b1 = tm.b1[idx], b2 = tm.b2[idx];
+      const Vec3 x = ctx.mesh.positions[FT[0]] * (1 - b1 - b2) + ctx.mesh.positions[FT[1]] * b1 +
+                     ctx.mesh.positions[FT[2]] * b2;
+      return std::abs(dot(x - g.centre, g.normal)) <= g.margin;
+    });
+  }
+}
+
+bool skip_distorted(const RasterContext& ctx, const Patch& patch, int t) {
+  if (ctx.mode == RasterMode::Advect) return false;
+  if (patch.triangle_delta.size() != patch.triangles.size()) return false;
+  return !(patch.triangle_delta[t] <= ctx.delta_max);
+}
+
+}  // namespace
+
+void setup_context(RasterContext& ctx) {
+  const SurfaceAtlas& atlas = ctx.atlas;
+  const TriMesh& mesh = ctx.mesh;
+  ctx.N = atlas.resolution;
+  const std::size_t nt = mesh.triangles.size();
+  if (atlas.corner_uv.size() != nt * 3 || atlas.chart_of_triangle.size() != nt)
+    throw std::invalid_argument("rasterize_atlas: the atlas does not belong to this mesh");
+  const std::size_t NN = std::size_t(ctx.N) * ctx.N;
+  if (NN >= (std::size_t(1) << 31)) throw std::invalid_argument("rasterize_atlas: atlas resolution above 46340");
+  const TexelMap& tm = atlas.texels;
+  ctx.index.assign(NN, -1);
+  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) ctx.index[tm.texel[i]] = int32_t(i);
+  }, 1 << 14);
+  ctx.keys.assign(tm.size(), kNoKey);
+
+  ctx.tri_normal.resize(nt);
+  ctx.tri_centroid.resize(nt);
+  ctx.tri_radius.resize(nt);
+  parallel_for(nt, [&](std::size_t b, std::size_t e) {
+    for (std::size_t t = b; t < e; ++t) {
+      const Tri& T = mesh.triangles[t];
+      const Vec3 &a = mesh.positions[T[0]], &bb = mesh.positions[T[1]], &c = mesh.positions[T[2]];
+      ctx.tri_normal[t] = normalized(cross(bb - a, c - a));
+      const Vec3 m = (a + bb + c) / 3.0;
+      ctx.tri_centroid[t] = m;
+      ctx.tri_radius[t] = std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}));
+    }
+  }, 4096);
+  // Vertex -> triangles in triangle order (deterministic walk order).
+  ctx.vt_offset.assign(mesh.positions.size() + 1, 0);
+  for (const Tri& T : mesh.triangles)
+    for (int k = 0; k < 3; ++k) ++ctx.vt_offset[T[k] + 1];
+  for (std::size_t v = 0; v < mesh.positions.size(); ++v) ctx.vt_offset[v + 1] += ctx.vt_offset[v];
+  ctx.vt_list.resize(nt * 3);
+  std::vector<int32_t> fill(ctx.vt_offset.begin(), ctx.vt_offset.end() - 1);
+  for (std::size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) ctx.vt_list[fill[mesh.triangles[t][k]]++] = int32_t(t);
+}
+
+void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters) {
+  const std::size_t nv = patch.positions.size();
+  if (patch.rest_uv.size() != nv) return;
+  // Per vertex: its fluid triangle and, through it, its atlas pixel position.
+  std::vector<int> vtri(nv);
+  std::vector<Vec2> vpix(nv);
+  std::vector<uint8_t> vok(nv);
+  for (std::size_t v = 0; v < nv; ++v) {
+    vtri[v] = vertex_triangle(ctx, patch, int(v));
+    vok[v] = vtri[v] >= 0 && to_pixels(ctx, vtri[v], patch.positions[v], vpix[v]);
+  }
+  std::vector<int32_t> scratch;
+  const int Nm1 = ctx.N - 1;
+  for (std::size_t ti = 0; ti < patch.triangles.size(); ++ti) {
+    const Tri& t = patch.triangles[ti];
+    if (skip_distorted(ctx, patch, int(ti))) {
+      ++counters.distorted_triangles;
+      continue;
+    }
+    const uint64_t key = make_key(patch_index, ti);
+    const int c0 = vok[t[0]] ? ctx.atlas.chart_of_triangle[vtri[t[0]]] : -1;
+    const bool same_chart = c0 >= 0 && vok[t[1]] && vok[t[2]] && ctx.atlas.chart_of_triangle[vtri[t[1]]] == c0 &&
+                            ctx.atlas.chart_of_triangle[vtri[t[2]]] == c0;
+    if (same_chart) {
+      const Vec2 P[3] = {vpix[t[0]], vpix[t[1]], vpix[t[2]]};
+      const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
+      const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
+      const auto& tri_of = ctx.atlas.texels.triangle;
+      const auto& chart_of = ctx.atlas.chart_of_triangle;
+      draw_triangle(ctx, P, uv, w, key, 0, 0, Nm1, Nm1,
+                    [&](int32_t idx) { return chart_of[tri_of[idx]] == c0; });
+    } else {
+      ++counters.seam_triangles;
+      const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
+      draw_seam_triangle(ctx, patch, int(ti), vt, key, scratch);
+    }
+  }
+}
+
+bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int texel_tri, Vec2 out[3],
+                   bool* same_chart) {
+  const Tri& t = patch.triangles[ti];
+  if (same_chart) *same_chart = false;
+  int vt[3];
+  for (int k = 0; k < 3; ++k) vt[k] = vertex_triangle(ctx, patch, t[k]);
+  bool ok = vt[0] >= 0 && vt[1] >= 0 && vt[2] >= 0;
+  if (ok) {
+    const int c0 = ctx.atlas.chart_of_triangle[vt[0]];
+    ok = ctx.atlas.chart_of_triangle[vt[1]] == c0 && ctx.atlas.chart_of_triangle[vt[2]] == c0;
+    for (int k = 0; ok && k < 3; ++k) ok = to_pixels(ctx, vt[k], patch.positions[t[k]], out[k]);
+    if (ok) {
+      if (same_chart) *same_chart = true;
+      return true;
+    }
+  }
+  return pixels_through(ctx, patch, t, texel_tri, out);
+}
+
+}  // namespace detail
+
+using namespace detail;
+
+FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                              const RasterOptions& options, const WeightOptions& weights, int frame,
+                              const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches) {
+  const auto t_start = Clock::now();
+  if (!(options.radius > 0)) throw std::invalid_argument("rasterize_atlas: radius must be positive");
+  if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize_atlas: exemplar not prepared");
+  FrameTextures out;
+  RasterStats& st = out.stats;
+  RasterContext ctx(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
+  ctx.locate = locate ? &locate : nullptr;
+  setup_context(ctx);
+  const int N = ctx.N;
+  const TexelMap& tm = atlas.texels;
+  st.chart_texels = tm.size();
+
+  // Exemplar level of detail: one atlas texel spans texel_world_size / (2r)
+  // of the patch's uv square.
+  double wsum = 0, asum = 0;
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const double a3 = triangle_area(mesh, int(t));
+    const Vec2* cu = &atlas.corner_uv[t * 3];
+    const double auv = 0.5 * std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(N) * N;
+    if (a3 > 0 && auv > 0 && std::isfinite(a3) && std::isfinite(auv)) {
+      wsum += a3 * std::sqrt(a3 / auv);
+      asum += a3;
+    }
+  }
+  st.texel_world_size = asum > 0 ? wsum / asum : 0;
+  const Image& base = exemplar.mips.levels[0];
+  const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
+  st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
+  st.seconds_setup = seconds_since(t_start);
+
+  // Pass 1: every patch triangle, any order (the atomic min decides).
+  auto t0 = Clock::now();
+  const std::size_t np = patches.patches.size();
+  if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize_atlas: too many patches");
+  std::vector<RasterCounters> counters(np);
+  parallel_for(np, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p) rasterize_patch(ctx, patches.patches[p], p, counters[p]);
+  }, 1);
+  for (const auto& c : counters) {
+    st.seam_triangles += c.seam_triangles;
+    st.distorted_triangles += c.distorted_triangles;
+  }
+  st.seconds_raster = seconds_since(t0);
+
+  // Step 8.
+  t0 = Clock::now();
+  if (options.fill_holes && make_patch) st.patches_born = fill_holes(ctx, patches, frame, make_patch, options.max_hole_patches);
+  // Texels hole filling could not reach (create_patch failed there) still
+  // need a colour: they take a covered neighbour's winner within their chart.
+  // Without hole filling the holes are left visible (alpha 0).
+  if (options.fill_holes) st.forced_texels = propagate_keys(ctx);
+  st.seconds_holes = seconds_since(t0);
+
+  // Resolve: the winner's (u, v, w) at the texel centre, then E and H.
+  t0 = Clock::now();
+  out.color = Image(N, N, 4);
+  out.displacement = Image(N, N, 1);
+  if (options.aov) out.aov = Image(N, N, 4);
+  float fallback[4];  // a texel no patch could reach (a chart hole filling failed on): the exemplar's mean
+  sample(exemplar.mips, 0.5, 0.5, 1e9, fallback);
+  std::vector<std::atomic<uint64_t>> won(patches.patches.size());
+  for (auto& a : won) a.store(0, std::memory_order_relaxed);
+  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
+    uint64_t last_key = kNoKey;
+    int last_tri = -1;
+    bool last_ok = false, last_same_chart = false;
+    Bary bary;
+    Vec2 P[3];
+    for (std::size_t i = b; i < e; ++i) {
+      const uint32_t pix = tm.texel[i];
+      const int x = int(pix % uint32_t(N)), y = int(pix / uint32_t(N));
+      const uint64_t key = ctx.keys[i];
+      float s[4] = {fallback[0], fallback[1], fallback[2], fallback[3]};
+      float aov[4] = {-1.f, 0.f, 0.f, 0.f};
+      if (key != kNoKey) {
+        const std::size_t p = std::size_t(key >> 32);
+        const int ti = int(key & 0xffffffffu);
+        const Patch& patch = patches.patches[p];
+        // Same-chart winners do not depend on the texel's triangle: reuse.
+        if (key != last_key || (!last_same_chart && last_tri != tm.triangle[i])) {
+          last_ok = winner_pixels(ctx, patch, ti, tm.triangle[i], P, &last_same_chart) && bary.init(P);
+          last_key = key;
+          last_tri = tm.triangle[i];
+        }
+        if (last_ok) {
+          double l0, l1, l2;
+          bary.at(x, y, l0, l1, l2);
+          const Tri& t = patch.triangles[ti];
+          const double u = l0 * patch.rest_uv[t[0]].x + l1 * patch.rest_uv[t[1]].x + l2 * patch.rest_uv[t[2]].x;
+          const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
+          const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
+                           l2 * vertex_weight(patch, t[2]);
+          sample(exemplar.mips, u, v, st.lod, s);
+          aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
+        }
+        won[p].fetch_add(1, std::memory_order_relaxed);
+      }
+      float* c = &out.color.pixels[std::size_t(pix) * 4];
+      c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
+      out.displacement.pixels[pix] = s[3];
+      if (options.aov)
+        for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
+    }
+  }, 1 << 12);
+  st.covered_texels = 0;
+  for (uint64_t k : ctx.keys) st.covered_texels += k != kNoKey;
+  st.seconds_resolve = seconds_since(t0);
+
+  // Step 9, after hole filling so a newborn patch that covered nothing goes too.
+  const bool retire = options.retire && options.mode != RasterMode::Advect;
+  std::vector<Patch> kept;
+  kept.reserve(patches.patches.size());
+  for (std::size_t p = 0; p < patches.patches.size(); ++p) {
+    const uint64_t n = won[p].load(std::memory_order_relaxed);
+    if (retire && n == 0) {
+      ++st.patches_retired;
+      continue;
+    }
+    kept.push_back(std::move(patches.patches[p]));
+    st.texels_per_patch.push_back(n);
+  }
+  patches.patches = std::move(kept);
+
+  // Gutter dilation: every pixel outside the charts copies its nearest chart
+  // pixel's colour (alpha stays 0), displacement and AOV.
+  t0 = Clock::now();
+  if (options.dilate && tm.size() > 0) {
+    std::vector<int32_t>& source = ctx.index;  // reused: no longer needed
+    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) source[i] = source[i] >= 0 ? int32_t(i) : -1;
+    }, 1 << 16);
+    dilate_sources(source, N, options.gutter);
+    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        const int32_t s = source[i];
+        if (s < 0 || std::size_t(s) == i) continue;
+        for (int k = 0; k < 3; ++k) out.color.pixels[i * 4 + k] = out.color.pixels[std::size_t(s) * 4 + k];
+        out.displacement.pixels[i] = out.displacement.pixels[s];
+        if (options.aov)
+          for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
+      }
+    }, 1 << 14);
+  } else if (options.aov) {
+    // Outside charts the AOV says "no patch".
+    for (std::size_t i = 0; i < ctx.index.size(); ++i)
+      if (ctx.index[i] < 0) out.aov.pixels[i * 4] = -1.f;
+  }
+  st.seconds_dilate = seconds_since(t0);
+  st.seconds_total = seconds_since(t_start);
+  return out;
+}
+
+}  // namespace lapflow

@@ -1,0 +1,132 @@
+#pragma once
+/// \file raster.hpp Lapped rasterization of the patches into the surface atlas
+/// (ALGORITHM.md steps 7-9): feature-map erosion, hole filling, retirement,
+/// and the atlas images (colour, displacement, AOV) with gutter dilation.
+///
+/// Design (speed is the point): no per-texel patch search. Every patch
+/// triangle is rasterized in atlas space (its vertices' fluid triangles give
+/// their atlas positions); the erosion test is the discard and age is the
+/// depth: each chart texel keeps the smallest 64-bit key
+/// `patch index << 32 | patch triangle index` through an atomic min, so the
+/// result does not depend on the order or the thread count. A resolve pass
+/// then samples the exemplar for each texel's winner.
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "lapflow/atlas.hpp"
+#include "lapflow/image.hpp"
+#include "lapflow/patches.hpp"
+
+namespace lapflow {
+
+/// How patches compose into a texel.
+enum class RasterMode {
+  Erosion,  ///< the paper (2021): oldest non-eroded patch wins, no blending
+  Blend,    ///< 2019 method: every covering patch contributes, alpha w, oldest on top
+  Advect,   ///< no erosion, no retirement (oldest covering patch wins); holes still filled
+};
+
+struct RasterOptions {
+  double radius = 0.1;   ///< r in metres: the exemplar spans 2r on the surface
+  double epsilon = 0.1;  ///< erosion bias of the paper (eq. 2)
+  RasterMode mode = RasterMode::Erosion;
+  bool fill_holes = true;     ///< step 8
+  bool retire = true;         ///< step 9 (Erosion and Blend only; never in Advect mode)
+  bool mipmap = true;         ///< trilinear exemplar lookups at the atlas texel footprint (antialiasing)
+  bool aov = true;            ///< fill FrameTextures::aov
+  bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
+  int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
+  std::size_t max_hole_patches = 200000;  ///< guard on patches born per frame
+};
+
+/// Box-filtered mip pyramid of the exemplar's colour and displacement,
+/// interleaved as 4 channels (R, G, B, H). Level 0 is the exemplar itself.
+struct ExemplarMips {
+  std::vector<Image> levels;
+};
+
+/// The erosion test of ALGORITHM.md step 7, precomputed per bake.
+/// A patch keeps a texel with patch coordinates (u, v) and weight w iff
+/// (u, v) is in [0,1]^2 and `sqrt(F(u,v) + D(u,v)) * inv_max - epsilon >= 1 - w`,
+/// i.e. `w >= T(u,v) = 1 + epsilon - sqrt(F + D) / M`. F is the feature map
+/// sampled bilinearly (sample_bilinear's convention, v = 0 at the bottom row),
+/// D(u,v) = max(0, 1 - |(u,v) - (0.5,0.5)| / 0.5) is evaluated exactly, M is
+/// the maximum of sqrt(F + D) over the exemplar's pixel centres, and w is the
+/// patch triangle's vertex weights w_V interpolated linearly (barycentric).
+struct ErosionMap {
+  Image feature;          ///< F_m, 1 channel in [0,1]
+  double inv_max = 1.0;   ///< 1 / M
+  double epsilon = 0.1;
+};
+
+/// What the rasterizer needs from the exemplar, built once per bake.
+struct RasterExemplar {
+  ExemplarMips mips;
+  ErosionMap erosion;
+};
+
+/// Builds the mip pyramid and the erosion map. `epsilon` is RasterOptions::epsilon.
+RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon);
+ExemplarMips build_exemplar_mips(const Exemplar& exemplar);
+ErosionMap build_erosion_map(const Image& feature, double epsilon);
+
+/// True when the patch keeps the texel (ALGORITHM.md step 7; see ErosionMap).
+/// In Advect mode only the [0,1]^2 test applies.
+bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode = RasterMode::Erosion);
+
+/// Colour and displacement (R, G, B, H) at patch coordinates (u, v), clamped
+/// at the borders, trilinear at level of detail `lod` (log2 of the footprint
+/// in level-0 pixels; <= 0 is plain bilinear on level 0).
+void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4]);
+
+struct RasterStats {
+  std::size_t chart_texels = 0;
+  std::size_t covered_texels = 0;  ///< chart texels a patch kept (100% after hole filling, unless a fallback failed)
+  std::size_t forced_texels = 0;   ///< chart texels given the patch of a neighbour because hole filling could not cover them
+  std::size_t patches_born = 0;    ///< by hole filling
+  std::size_t patches_retired = 0;
+  std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
+  std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
+  double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
+  double texel_world_size = 0;     ///< metres per atlas texel (area-weighted mean)
+  /// Chart texels won by each patch, aligned with PatchSet::patches after retirement.
+  std::vector<uint64_t> texels_per_patch;
+  double seconds_setup = 0, seconds_raster = 0, seconds_holes = 0, seconds_resolve = 0, seconds_dilate = 0,
+         seconds_total = 0;
+};
+
+/// The atlas images of one frame, resolution x resolution, row 0 at the top
+/// (texel (x, y) has atlas uv ((x+0.5)/N, 1-(y+0.5)/N)).
+struct FrameTextures {
+  Image color;         ///< RGBA linear; A = 1 on covered chart texels (coverage), 0 elsewhere (RGB dilated there)
+  Image displacement;  ///< 1 channel, H of the winning patch (dilated outside charts)
+  Image aov;           ///< patch_id (stable Patch::id as float, -1 where none), u, v, w; empty unless RasterOptions::aov
+  RasterStats stats;
+};
+
+/// Makes a hole-filling patch at a surface point with the given id (the
+/// frame's create_patch in production, something analytic in tests).
+using PatchMaker = std::function<std::optional<Patch>(const SurfacePoint& at, uint32_t id)>;
+/// Fluid triangle under a 3D point, -1 when none (for patch vertices whose
+/// surface_triangle is unknown).
+using TriangleLocator = std::function<int(const Vec3& p)>;
+
+/// Steps 7-9 on `mesh` and its atlas. Hole-filling patches come from
+/// `make_patch` (nullptr: no hole filling) and are appended to `patches` with
+/// ids from patches.next_id and birth frame `frame`; retired patches are
+/// removed. Patch triangles whose triangle_delta exceeds weights.delta_max are
+/// not drawn (Erosion and Blend modes). Deterministic at any thread count.
+FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                              const RasterOptions& options, const WeightOptions& weights, int frame,
+                              const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches);
+
+/// The production entry point: hole-filling patches by create_patch on
+/// `surface` (fluid triangle normal at the texel), vertices located by
+/// closest point.
+FrameTextures rasterize_atlas(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                              const RasterOptions& options, const PatchOptions& patch_options,
+                              const WeightOptions& weights, int frame, PatchSet& patches);
+
+}  // namespace lapflow

@@ -1,0 +1,87 @@
+// What the rasterizer precomputes from the exemplar once per bake: the
+// box-filtered mip pyramid (antialiasing: exemplar texels are often much
+// smaller than atlas texels) and the erosion map's constant M.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "lapflow/parallel.hpp"
+#include "lapflow/raster.hpp"
+#include "raster_sampling.hpp"
+
+namespace lapflow {
+namespace {
+
+// 2x2 box filter; an odd last column/row is averaged with itself (clamped),
+// which keeps every level covering the same [0,1]^2.
+Image half_size(const Image& src) {
+  const int w = std::max(1, src.width / 2), h = std::max(1, src.height / 2);
+  Image dst(w, h, src.channels);
+  parallel_for(std::size_t(h), [&](std::size_t y0, std::size_t y1) {
+    for (std::size_t y = y0; y < y1; ++y)
+      for (int x = 0; x < w; ++x) {
+        const int sx0 = std::min(2 * x, src.width - 1), sx1 = std::min(2 * x + 1, src.width - 1);
+        const int sy0 = std::min(int(2 * y), src.height - 1), sy1 = std::min(int(2 * y + 1), src.height - 1);
+        for (int c = 0; c < src.channels; ++c)
+          dst.at(x, int(y), c) =
+              0.25f * (src.at(sx0, sy0, c) + src.at(sx1, sy0, c) + src.at(sx0, sy1, c) + src.at(sx1, sy1, c));
+      }
+  }, 16);
+  return dst;
+}
+
+}  // namespace
+
+ExemplarMips build_exemplar_mips(const Exemplar& ex) {
+  if (ex.color.empty() || ex.color.channels < 3)
+    throw std::invalid_argument("build_exemplar_mips: the exemplar has no RGB colour image");
+  const bool has_disp = ex.displacement.width == ex.color.width && ex.displacement.height == ex.color.height &&
+                        ex.displacement.channels >= 1;
+  Image base(ex.color.width, ex.color.height, 4);
+  for (int y = 0; y < base.height; ++y)
+    for (int x = 0; x < base.width; ++x) {
+      for (int c = 0; c < 3; ++c) base.at(x, y, c) = ex.color.at(x, y, c);
+      base.at(x, y, 3) = has_disp ? ex.displacement.at(x, y, 0) : 0.f;
+    }
+  ExemplarMips mips;
+  mips.levels.push_back(std::move(base));
+  while (mips.levels.back().width > 1 || mips.levels.back().height > 1)
+    mips.levels.push_back(half_size(mips.levels.back()));
+  return mips;
+}
+
+ErosionMap build_erosion_map(const Image& feature, double epsilon) {
+  if (feature.empty() || feature.channels != 1)
+    throw std::invalid_argument("build_erosion_map: the feature map must have exactly 1 channel");
+  ErosionMap map;
+  map.feature = feature;
+  map.epsilon = epsilon;
+  // M over the pixel centres, as the paper's "maximum over the exemplar".
+  double m = 0;
+  for (int y = 0; y < feature.height; ++y)
+    for (int x = 0; x < feature.width; ++x) {
+      const double u = (x + 0.5) / feature.width, v = 1.0 - (y + 0.5) / feature.height;
+      const double d = std::sqrt((u - 0.5) * (u - 0.5) + (v - 0.5) * (v - 0.5));
+      const double D = std::max(0.0, 1.0 - d / 0.5);
+      m = std::max(m, std::sqrt(std::max(0.0, double(feature.at(x, y, 0))) + D));
+    }
+  map.inv_max = m > 0 ? 1.0 / m : 1.0;
+  return map;
+}
+
+RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon) {
+  RasterExemplar r;
+  r.mips = build_exemplar_mips(exemplar);
+  r.erosion = build_erosion_map(exemplar.feature, epsilon);
+  return r;
+}
+
+bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode) {
+  return detail::keeps(map, u, v, w, mode);
+}
+
+void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4]) {
+  detail::sample(mips, u, v, lod, out);
+}
+
+}  // namespace lapflow

@@ -1,0 +1,75 @@
+#pragma once
+// Shared state of one rasterize_atlas call, split across rasterize_atlas.cpp
+// (setup, raster and resolve passes), hole_filling.cpp and gutter_dilation.cpp.
+#include <atomic>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "lapflow/raster.hpp"
+
+namespace lapflow::detail {
+
+inline constexpr uint64_t kNoKey = std::numeric_limits<uint64_t>::max();
+
+inline uint64_t make_key(std::size_t patch_index, std::size_t triangle) {
+  return (uint64_t(patch_index) << 32) | uint64_t(uint32_t(triangle));
+}
+
+struct RasterContext {
+  const TriMesh& mesh;
+  const SurfaceAtlas& atlas;
+  const ErosionMap& erosion;
+  RasterMode mode;
+  double delta_max;
+  const TriangleLocator* locate = nullptr;
+  int N = 0;
+  /// Texel-map index of every atlas pixel y * N + x, -1 outside charts.
+  std::vector<int32_t> index;
+  /// Per chart texel: the smallest key of a patch that keeps it (kNoKey: none).
+  std::vector<uint64_t> keys;
+  /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).
+  std::vector<Vec3> tri_normal, tri_centroid;
+  std::vector<double> tri_radius;
+  /// Vertex -> incident fluid triangles (CSR), for the seam fallback's walk.
+  std::vector<int32_t> vt_offset, vt_list;
+
+  RasterContext(const TriMesh& m, const SurfaceAtlas& a, const ErosionMap& e, RasterMode mo, double dm)
+      : mesh(m), atlas(a), erosion(e), mode(mo), delta_max(dm) {}
+};
+
+/// Counters of one raster call (summed per chunk, integers only).
+struct RasterCounters {
+  std::size_t seam_triangles = 0, distorted_triangles = 0;
+};
+
+/// Builds index, keys and the fluid-triangle tables.
+void setup_context(RasterContext& ctx);
+
+/// Rasterizes every triangle of `patch` (PatchSet index `patch_index`) into
+/// ctx.keys by atomic min. Safe to call concurrently for different patches.
+void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters);
+
+/// Atlas pixel coordinates (texel centres at integers) of the three vertices
+/// of patch triangle t as seen from the texel's fluid triangle `texel_tri`:
+/// the same numbers rasterize_patch used when the key was written.
+/// `same_chart` (optional) tells whether they do not depend on `texel_tri`.
+bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texel_tri, Vec2 out[3],
+                   bool* same_chart = nullptr);
+
+/// Step 8: new patches for uncovered chart texels (texel order), each
+/// rasterized into the still-open texels; then chart texels that are still
+/// open take a covered neighbour's key (documented fallback). Returns patches born.
+std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
+                       std::size_t max_patches);
+/// Gives every open chart texel the key of a covered 8-neighbour in the same
+/// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
+std::size_t propagate_keys(RasterContext& ctx);
+
+/// Fills texels outside charts from the nearest chart texel: `gutter`
+/// 8-neighbour dilation passes, then a row-nearest and a row-copy fill.
+/// `source` holds, per pixel, its own index on chart texels and -1 elsewhere;
+/// on return it names a chart pixel for every pixel (when any exists).
+void dilate_sources(std::vector<int32_t>& source, int N, int gutter);
+
+}  // namespace lapflow::detail

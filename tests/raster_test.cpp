@@ -1,0 +1,398 @@
+// Rasterizer tests on hand-built planes with analytic answers: the erosion is
+// the paper's formula texel by texel, the oldest non-eroded patch wins, one
+// patch per texel (no blending), holes get filled, hidden patches retire, the
+// seam fallback agrees with the in-chart path, and any thread count gives the
+// same images.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "lapflow/parallel.hpp"
+#include "lapflow/raster.hpp"
+#include "raster_fixture.hpp"
+
+namespace lapflow {
+namespace {
+
+using test::PatchSpec;
+using test::PlaneFixture;
+
+// The paper's erosion formula written out independently of the rasterizer:
+// returns the signed margin (>= 0 kept) of a patch at (u, v) with weight w.
+struct Formula {
+  const Image& feature;
+  double M = 0, eps = 0.1;
+  Formula(const Image& f, double e) : feature(f), eps(e) {
+    for (int y = 0; y < f.height; ++y)
+      for (int x = 0; x < f.width; ++x) {
+        const double u = (x + 0.5) / f.width, v = 1 - (y + 0.5) / f.height;
+        M = std::max(M, std::sqrt(f.at(x, y, 0) + D(u, v)));
+      }
+  }
+  static double D(double u, double v) { return std::max(0.0, 1 - std::hypot(u - 0.5, v - 0.5) / 0.5); }
+  double margin(double u, double v, double w) const {
+    const double inside = std::min({u, 1 - u, v, 1 - v});
+    if (inside < 0) return inside;
+    float F;
+    sample_bilinear(feature, u, v, &F);
+    const double m = std::sqrt(F + D(u, v)) / M - eps - (1 - w);
+    return std::min(m, inside);
+  }
+};
+
+// Reference winner by the paper's definition: walk the patches oldest first,
+// the first that covers the texel's point and keeps it. `ambiguous` when a
+// decision on the way was within round-off.
+struct RefWinner {
+  int id = -1;
+  bool ambiguous = false;
+};
+RefWinner reference(const PlaneFixture& f, const std::vector<std::pair<uint32_t, PatchSpec>>& stack,
+                    const Formula& formula, const Vec3& p) {
+  RefWinner r;
+  for (const auto& [id, s] : stack) {
+    if (!s.covers(p, f.L)) continue;
+    const double x0 = std::max(0.0, s.centre.x - s.half), x1 = std::min(f.L, s.centre.x + s.half);
+    const double y0 = std::max(0.0, s.centre.y - s.half), y1 = std::min(f.L, s.centre.y + s.half);
+    const double edge = std::min({p.x - x0, x1 - p.x, p.y - y0, y1 - p.y});
+    const Vec2 uv = s.uv_at(p);
+    const double m = formula.margin(uv.x, uv.y, s.w_at(p));
+    if (std::abs(m) < 1e-6 || edge < 1e-9) r.ambiguous = true;
+    if (m >= 0) {
+      r.id = int(id);
+      return r;
+    }
+  }
+  return r;
+}
+
+RasterExemplar prepared(const Exemplar& ex, double eps = 0.1) { return prepare_raster_exemplar(ex, eps); }
+
+struct Scene {
+  PlaneFixture f;
+  Exemplar ex;
+  RasterExemplar rex;
+  PatchSet patches;
+  std::vector<std::pair<uint32_t, PatchSpec>> specs;  // id -> spec, in stack order
+  double r = 0.1;
+
+  void add(const PatchSpec& s) {
+    const uint32_t id = patches.next_id++;
+    patches.patches.push_back(test::make_grid_patch(f, s, id));
+    specs.push_back({id, s});
+  }
+  // Hole-filling patches: full-size, w = 1, angle from the id.
+  PatchMaker maker() {
+    return [this](const SurfacePoint& at, uint32_t id) -> std::optional<Patch> {
+      PatchSpec s;
+      s.centre = at.position;
+      s.r = r, s.half = r, s.m = 8;
+      s.angle = 6.283185307179586 * hash_to_unit(hash64(7, id));
+      specs.push_back({id, s});
+      return test::make_grid_patch(f, s, id);
+    };
+  }
+  FrameTextures run(RasterOptions o, bool holes = true) {
+    o.radius = r;
+    return rasterize_atlas(f.mesh, f.atlas, rex, o, WeightOptions{}, 0, holes ? maker() : PatchMaker{},
+                           TriangleLocator{}, patches);
+  }
+  const PatchSpec& spec(uint32_t id) const {
+    for (const auto& [i, s] : specs)
+      if (i == id) return s;
+    throw std::runtime_error("no spec");
+  }
+};
+
+Scene random_scene(bool split, int count, uint64_t seed, int N = 256) {
+  Scene sc;
+  sc.f = test::make_plane(16, 1.0, N, split);
+  sc.ex = test::ramp_exemplar(64, 0.f);
+  // A feature map with structure so that erosion shapes are not just disks.
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x)
+      sc.ex.feature.at(x, y, 0) = float(0.5 + 0.5 * std::sin(x * 0.4) * std::cos(y * 0.3));
+  sc.ex.displacement = sc.ex.feature;
+  sc.rex = prepared(sc.ex);
+  for (int k = 0; k < count; ++k) {
+    PatchSpec s;
+    s.r = sc.r, s.half = sc.r;
+    s.centre = {0.1 + 0.8 * hash_to_unit(hash64(seed, k, 1)), 0.1 + 0.8 * hash_to_unit(hash64(seed, k, 2)), 0};
+    s.angle = 6.283185307179586 * hash_to_unit(hash64(seed, k, 3));
+    s.w0 = 0.6 + 0.4 * hash_to_unit(hash64(seed, k, 4));
+    s.wx = k % 3 == 0 ? 1.5 : 0;  // some patches with a weight gradient (affine: interpolated exactly)
+    sc.add(s);
+  }
+  return sc;
+}
+
+// The rasterized winner of every chart texel equals the paper's definition.
+void expect_matches_reference(const Scene& sc, const FrameTextures& out, std::size_t* checked_out = nullptr) {
+  const Formula formula(sc.ex.feature, 0.1);
+  const auto& tm = sc.f.atlas.texels;
+  std::size_t checked = 0, mismatches = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const Vec3 p = sc.f.texel_point(k);
+    const RefWinner ref = reference(sc.f, sc.specs, formula, p);
+    if (ref.ambiguous) continue;
+    const int x = int(tm.texel[k] % sc.f.atlas.resolution), y = int(tm.texel[k] / sc.f.atlas.resolution);
+    const int got = int(out.aov.at(x, y, 0));
+    ++checked;
+    if (got != ref.id) {
+      if (++mismatches <= 5) ADD_FAILURE() << "texel (" << x << "," << y << ") point (" << p.x << "," << p.y
+                                           << "): patch " << got << ", paper says " << ref.id;
+    }
+  }
+  EXPECT_EQ(mismatches, 0u) << "of " << checked << " texels";
+  EXPECT_GT(checked, tm.size() * 9 / 10);
+  if (checked_out) *checked_out = checked;
+}
+
+TEST(Raster, ErosionMatchesThePaperFormulaTexelByTexel) {
+  // One undistorted patch covering the plane, constant weight, a striped
+  // feature map: the kept region is the paper's Fig. 8 shape for each w.
+  std::vector<double> kept_fraction;
+  for (double w : {1.0, 0.8, 0.6, 0.45}) {
+    Scene sc;
+    sc.f = test::make_plane(8, 1.0, 192, false);
+    sc.ex = test::ramp_exemplar(48, 0.f);
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 48; ++x) sc.ex.feature.at(x, y, 0) = float(0.5 + 0.5 * std::sin(x * 0.5 + y * 0.2));
+    sc.rex = prepared(sc.ex);
+    sc.r = 0.5;
+    PatchSpec s;
+    s.centre = {0.5, 0.5, 0};
+    s.r = 0.5, s.half = 0.5, s.m = 10, s.w0 = w;
+    sc.add(s);
+    RasterOptions o;
+    o.fill_holes = false;
+    o.retire = false;
+    const FrameTextures out = sc.run(o, false);
+    std::size_t checked = 0;
+    expect_matches_reference(sc, out, &checked);
+    kept_fraction.push_back(double(out.stats.covered_texels) / out.stats.chart_texels);
+    EXPECT_EQ(out.stats.forced_texels, 0u);
+  }
+  // Lower weight, more erosion (strictly: the stripes make each step visible).
+  for (std::size_t i = 1; i < kept_fraction.size(); ++i) EXPECT_LT(kept_fraction[i], kept_fraction[i - 1]);
+  // w = 1: only the border erodes (inscribed disk of D plus the feature map's help).
+  EXPECT_GT(kept_fraction[0], 0.7);
+}
+
+TEST(Raster, FlatFeatureMapKeepsTheInscribedDisk) {
+  // F = 0: kept iff sqrt(D)/M - eps >= 1 - w. With w = 1, M = max sqrt(D) ~ 1:
+  // D >= eps^2 M^2, i.e. |uv - c| <= 0.5 (1 - eps^2 M^2): a disk of area ~ pi 0.495^2.
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, 256, false);
+  sc.ex = test::ramp_exemplar(64, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = 0.5;
+  PatchSpec s;
+  s.centre = {0.5, 0.5, 0};
+  s.r = 0.5, s.half = 0.5, s.m = 8;
+  sc.add(s);
+  RasterOptions o;
+  o.fill_holes = false;
+  const FrameTextures out = sc.run(o, false);
+  const double M = sc.rex.erosion.inv_max > 0 ? 1 / sc.rex.erosion.inv_max : 0;
+  const double radius = 0.5 * (1 - 0.01 * M * M);
+  const double expected = M_PI * radius * radius;
+  EXPECT_NEAR(double(out.stats.covered_texels) / out.stats.chart_texels, expected, 0.01);
+  expect_matches_reference(sc, out);
+}
+
+TEST(Raster, OldestNonErodedPatchWinsOnePatchPerTexel) {
+  Scene sc = random_scene(false, 40, 11);
+  RasterOptions o;
+  o.mipmap = false;
+  const FrameTextures out = sc.run(o);
+  EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+  EXPECT_EQ(out.stats.forced_texels, 0u);
+  expect_matches_reference(sc, out);
+  // No blending: each texel's colour is the exemplar at its own patch (u, v),
+  // and that (u, v) is the analytic map of the winning patch.
+  const auto& tm = sc.f.atlas.texels;
+  const int N = sc.f.atlas.resolution;
+  double max_colour = 0, max_uv = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const int x = int(tm.texel[k] % N), y = int(tm.texel[k] / N);
+    const int id = int(out.aov.at(x, y, 0));
+    ASSERT_GE(id, 0);
+    const Vec2 uv = sc.spec(uint32_t(id)).uv_at(sc.f.texel_point(k));
+    max_uv = std::max({max_uv, std::abs(uv.x - out.aov.at(x, y, 1)), std::abs(uv.y - out.aov.at(x, y, 2))});
+    float e[3];
+    sample_bilinear(sc.ex.color, out.aov.at(x, y, 1), out.aov.at(x, y, 2), e);
+    for (int c = 0; c < 3; ++c) max_colour = std::max(max_colour, double(std::abs(e[c] - out.color.at(x, y, c))));
+    EXPECT_EQ(out.color.at(x, y, 3), 1.f);
+  }
+  EXPECT_LT(max_uv, 1e-5);      // float AOV of an exact affine map
+  EXPECT_LT(max_colour, 1e-5);  // one patch's colour, not a mix
+}
+
+TEST(Raster, SeamFallbackAgreesWithThePaperAcrossCharts) {
+  Scene sc = random_scene(true, 40, 23);
+  RasterOptions o;
+  o.mipmap = false;
+  const FrameTextures out = sc.run(o);
+  EXPECT_GT(out.stats.seam_triangles, 0u);
+  EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+  expect_matches_reference(sc, out);
+}
+
+TEST(Raster, OlderPatchHidesYoungerOneWhichRetires) {
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, 128, false);
+  sc.ex = test::ramp_exemplar(32, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = 0.3;
+  PatchSpec a;
+  a.centre = {0.5, 0.5, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 1.0;
+  PatchSpec hidden = a;  // same place, lower weight: its kept region is inside a's
+  hidden.w0 = 0.7, hidden.angle = 0.3;
+  PatchSpec side = a;
+  side.centre = {0.7, 0.5, 0}, side.half = 0.25;
+  sc.add(a);
+  sc.add(hidden);
+  sc.add(side);
+  RasterOptions o;
+  o.fill_holes = false;
+  const FrameTextures out = sc.run(o, false);
+  ASSERT_EQ(sc.patches.patches.size(), 2u);
+  EXPECT_EQ(sc.patches.patches[0].id, 0u);
+  EXPECT_EQ(sc.patches.patches[1].id, 2u);
+  EXPECT_EQ(out.stats.patches_retired, 1u);
+  ASSERT_EQ(out.stats.texels_per_patch.size(), 2u);
+  EXPECT_GT(out.stats.texels_per_patch[1], 0u);
+  // Where both a and side keep a texel, a (older) gives it.
+  const Formula formula(sc.ex.feature, 0.1);
+  const auto& tm = sc.f.atlas.texels;
+  std::size_t both = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const Vec3 p = sc.f.texel_point(k);
+    if (!a.covers(p, 1) || !side.covers(p, 1)) continue;
+    const Vec2 ua = a.uv_at(p), us = side.uv_at(p);
+    if (formula.margin(ua.x, ua.y, 1) > 1e-6 && formula.margin(us.x, us.y, 1) > 1e-6) {
+      ++both;
+      EXPECT_EQ(out.aov.at(int(tm.texel[k] % 128), int(tm.texel[k] / 128), 0), 0.f);
+    }
+  }
+  EXPECT_GT(both, 100u);
+  // And the retired patch is removed even without hole filling.
+  EXPECT_EQ(out.stats.texels_per_patch[0] + out.stats.texels_per_patch[1], out.stats.covered_texels);
+}
+
+TEST(Raster, HoleFillingCoversEveryTexelFromNothing) {
+  Scene sc = random_scene(true, 0, 5);
+  RasterOptions o;
+  const FrameTextures out = sc.run(o);
+  EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+  EXPECT_EQ(out.stats.forced_texels, 0u);
+  EXPECT_GT(out.stats.patches_born, 0u);
+  // Each newborn patch keeps at least a disk of radius ~ r/4 around its centre,
+  // so far fewer patches than area / (pi (r/4)^2) are needed.
+  EXPECT_LT(out.stats.patches_born, std::size_t(1.0 / (M_PI * 0.025 * 0.025)));
+  EXPECT_EQ(sc.patches.patches.size(), out.stats.patches_born);  // none retired: each was born to cover
+  for (const Patch& p : sc.patches.patches) EXPECT_EQ(p.birth_frame, 0);
+  expect_matches_reference(sc, out);
+}
+
+TEST(Raster, SameImagesForOneAndTwoThreads) {
+  auto bake = [](int threads) {
+    set_thread_count(threads);
+    Scene sc = random_scene(true, 60, 99);
+    RasterOptions o;
+    FrameTextures out = sc.run(o);
+    set_thread_count(0);
+    return std::make_pair(std::move(out), sc.patches.patches.size());
+  };
+  const auto [a, na] = bake(1);
+  const auto [b, nb] = bake(2);
+  EXPECT_EQ(na, nb);
+  EXPECT_EQ(a.stats.patches_born, b.stats.patches_born);
+  EXPECT_TRUE(a.color.pixels == b.color.pixels);
+  EXPECT_TRUE(a.displacement.pixels == b.displacement.pixels);
+  EXPECT_TRUE(a.aov.pixels == b.aov.pixels);
+}
+
+TEST(Raster, GutterAndBackgroundTakeTheNearestChartTexel) {
+  Scene sc = random_scene(true, 30, 3, 128);
+  RasterOptions o;
+  o.gutter = 3;
+  const FrameTextures out = sc.run(o);
+  const int N = 128;
+  std::vector<int> chart(N * N, 0);
+  for (uint32_t t : sc.f.atlas.texels.texel) chart[t] = 1;
+  for (int y = 0; y < N; ++y)
+    for (int x = 0; x < N; ++x) {
+      if (chart[y * N + x]) continue;
+      EXPECT_EQ(out.color.at(x, y, 3), 0.f);
+      // A pixel next to a chart copies one of its chart neighbours.
+      bool next_to_chart = false, equals_a_neighbour = false;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= N || yy >= N || !chart[yy * N + xx]) continue;
+          next_to_chart = true;
+          equals_a_neighbour |= out.color.at(xx, yy, 0) == out.color.at(x, y, 0) &&
+                                out.aov.at(xx, yy, 0) == out.aov.at(x, y, 0);
+        }
+      if (next_to_chart) EXPECT_TRUE(equals_a_neighbour) << x << "," << y;
+      EXPECT_GE(out.aov.at(x, y, 0), 0.f);  // every pixel got some chart texel's values
+    }
+}
+
+TEST(Raster, MipLevelMatchesTheTexelFootprint) {
+  // 1 m plane, 0.9 of a 256 atlas: 1/230.4 m per texel; r = 0.1 puts 0.2 m on
+  // a 64-pixel exemplar: 320 px/m, so 1.39 exemplar pixels per atlas texel.
+  Scene sc = random_scene(false, 20, 8);
+  RasterOptions o;
+  const FrameTextures out = sc.run(o);
+  EXPECT_NEAR(out.stats.texel_world_size, 1.0 / (0.9 * 256), 1e-9);
+  EXPECT_NEAR(out.stats.lod, std::log2(64 / (0.9 * 256 * 0.2)), 1e-9);
+  // The ramp survives box filtering: the colour still reads the patch's (u, v)
+  // wherever the lookup stays clear of the exemplar border.
+  const auto& tm = sc.f.atlas.texels;
+  double worst = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const int x = int(tm.texel[k] % 256), y = int(tm.texel[k] / 256);
+    const double u = out.aov.at(x, y, 1), v = out.aov.at(x, y, 2);
+    if (std::min({u, v, 1 - u, 1 - v}) < 0.05) continue;
+    worst = std::max({worst, std::abs(out.color.at(x, y, 0) - u), std::abs(out.color.at(x, y, 1) - v)});
+  }
+  EXPECT_LT(worst, 1e-5);
+}
+
+TEST(Raster, DistortedTrianglesAreNeverDrawn) {
+  Scene sc = random_scene(false, 10, 4);
+  for (Patch& p : sc.patches.patches) {
+    p.triangle_delta.assign(p.triangles.size(), 1.0f);
+    for (std::size_t t = 0; t < p.triangles.size(); t += 2) p.triangle_delta[t] = 3.5f;  // > delta_max = 3
+  }
+  RasterOptions o;
+  o.fill_holes = false;
+  const FrameTextures out = sc.run(o, false);
+  EXPECT_EQ(out.stats.distorted_triangles, 10u * 64);
+  // The kept texels all come from even triangles... i.e. none of the odd ones:
+  // check via the AOV that no texel lies in an "a, b, c" (lower-right) half cell.
+  const auto& tm = sc.f.atlas.texels;
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const int x = int(tm.texel[k] % 256), y = int(tm.texel[k] / 256);
+    const int id = int(out.aov.at(x, y, 0));
+    if (id < 0) continue;
+    const PatchSpec& s = sc.spec(uint32_t(id));
+    const Vec3 p = sc.f.texel_point(k);
+    const double cell = 2 * s.half / s.m;
+    const double fx = std::fmod(p.x - (s.centre.x - s.half), cell) / cell;
+    const double fy = std::fmod(p.y - (s.centre.y - s.half), cell) / cell;
+    if (std::abs(fx - fy) < 1e-3) continue;  // on the diagonal both halves touch
+    EXPECT_LT(fx, fy) << "texel from a triangle with delta > delta_max";
+    ++kept;
+  }
+  EXPECT_GT(kept, 1000u);
+}
+
+}  // namespace
+}  // namespace lapflow
