@@ -1,1 +1,102 @@
-// placeholder: filled by its stage's work
+// Loading an exemplar: colour E, feature map F_m and displacement H, brought
+// to one size and one channel layout so the rasterizer samples them blindly.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "lapflow/errors.hpp"
+#include "lapflow/image.hpp"
+
+namespace lapflow {
+namespace {
+
+// Colour with 1 (grey), 2 (grey + alpha), 3 or 4 (RGBA) channels becomes RGB.
+// Alpha is dropped: an exemplar covers its whole square.
+Image to_rgb(const Image& img) {
+  if (img.channels == 3) return img;
+  Image out(img.width, img.height, 3);
+  const std::size_t n = std::size_t(img.width) * img.height;
+  for (std::size_t p = 0; p < n; ++p)
+    for (int c = 0; c < 3; ++c) {
+      const int src = img.channels >= 3 ? c : 0;
+      out.pixels[p * 3 + c] = img.pixels[p * img.channels + src];
+    }
+  return out;
+}
+
+// A data map with several channels is reduced to its luminance (alpha
+// ignored); painters often save grey maps as RGB.
+Image to_grey(const Image& img) {
+  if (img.channels == 1) return img;
+  Image out(img.width, img.height, 1);
+  const std::size_t n = std::size_t(img.width) * img.height;
+  for (std::size_t p = 0; p < n; ++p) {
+    const float* px = &img.pixels[p * img.channels];
+    out.pixels[p] = img.channels >= 3 ? 0.2126f * px[0] + 0.7152f * px[1] + 0.0722f * px[2] : px[0];
+  }
+  return out;
+}
+
+// Same aspect ratio, up to the rounding of one pixel on the longer side.
+bool same_aspect(const Image& a, const Image& b) {
+  const double lhs = double(a.width) * b.height, rhs = double(b.width) * a.height;
+  const double tolerance = double(std::max({a.width, a.height, b.width, b.height}));
+  return std::abs(lhs - rhs) <= tolerance;
+}
+
+Image fit_to(const Image& map, const Image& color, const std::string& map_path, const std::string& color_path,
+             const char* what) {
+  if (map.width == color.width && map.height == color.height) return map;
+  if (!same_aspect(map, color))
+    throw InputError(map_path, fmt::format("{} is {}x{} but the colour image {} is {}x{}: the aspect ratios differ",
+                                           what, map.width, map.height, color_path, color.width, color.height));
+  fmt::print(stderr, "warning: {}: {} is {}x{}, resampled to the colour image's {}x{}\n", map_path, what,
+             map.width, map.height, color.width, color.height);
+  return resize_image(map, color.width, color.height);
+}
+
+std::string exemplar_name(const std::string& color_path) {
+  std::string stem = std::filesystem::path(color_path).stem().string();
+  for (const char* suffix : {".color", "_color", ".colour", "_colour", ".albedo", "_albedo"}) {
+    const std::string s(suffix);
+    if (stem.size() > s.size() && stem.compare(stem.size() - s.size(), s.size(), s) == 0)
+      return stem.substr(0, stem.size() - s.size());
+  }
+  return stem;
+}
+
+}  // namespace
+
+Exemplar load_exemplar(const std::string& color_path, const std::string& feature_path,
+                       const std::string& displacement_path) {
+  Exemplar ex;
+  ex.name = exemplar_name(color_path);
+  ex.color = to_rgb(read_image(color_path, ColorSpace::Auto));
+
+  Image feature = to_grey(read_image(feature_path, ColorSpace::Linear));
+  // Tolerate float round-off from tools that write EXR feature maps.
+  constexpr float kSlack = 1e-4f;
+  for (int y = 0; y < feature.height; ++y)
+    for (int x = 0; x < feature.width; ++x) {
+      float& f = feature.at(x, y, 0);
+      if (f < -kSlack || f > 1 + kSlack)
+        throw InputError(feature_path, fmt::format("pixel ({}, {}): feature value {} is outside [0, 1]", x, y, f));
+      f = std::clamp(f, 0.f, 1.f);
+    }
+  ex.feature = fit_to(feature, ex.color, feature_path, color_path, "feature map");
+  // Bilinear/box resampling of values in [0,1] stays in [0,1] up to rounding.
+  for (float& f : ex.feature.pixels) f = std::clamp(f, 0.f, 1.f);
+
+  if (displacement_path.empty()) {
+    ex.displacement = ex.feature;
+  } else {
+    Image disp = to_grey(read_image(displacement_path, ColorSpace::Linear));
+    ex.displacement = fit_to(disp, ex.color, displacement_path, color_path, "displacement map");
+  }
+  return ex;
+}
+
+}  // namespace lapflow

@@ -1,1 +1,266 @@
-// placeholder: filled by its stage's work
+// Images in and out. OpenImageIO lives here and nowhere else; the rest of
+// lapflow sees only lapflow::Image (interleaved linear float, row 0 on top).
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include "lapflow/atomic_file.hpp"
+#include "lapflow/errors.hpp"
+#include "lapflow/image.hpp"
+#include "lapflow/parallel.hpp"
+
+namespace lapflow {
+namespace {
+
+// OIIO error messages may span several lines; lapflow errors are one line.
+std::string one_line(std::string s) {
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+  std::string out;
+  for (char c : s) {
+    if (c == '\n')
+      out += "; ";
+    else
+      out += c;
+  }
+  return out.empty() ? std::string("unknown OpenImageIO error") : out;
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+float srgb_to_linear(float c) {
+  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+float linear_to_srgb(float c) {
+  return c <= 0.0031308f ? c * 12.92f : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+// Whether a file read with ColorSpace::Auto holds sRGB-encoded values. Integer
+// files are display-referred in practice (PNG/JPEG from paint programs), so
+// they are decoded unless explicitly tagged linear; float files are linear
+// unless explicitly tagged sRGB.
+bool auto_is_srgb(const OIIO::ImageSpec& spec) {
+  const std::string tag = lower(spec.get_string_attribute("oiio:ColorSpace"));
+  if (tag.find("srgb") != std::string::npos) return true;
+  if (tag == "linear" || tag == "scene_linear" || tag.find("lin_") == 0) return false;
+  const auto base = OIIO::TypeDesc::BASETYPE(spec.format.basetype);
+  return !(base == OIIO::TypeDesc::HALF || base == OIIO::TypeDesc::FLOAT || base == OIIO::TypeDesc::DOUBLE);
+}
+
+// Index of the alpha channel (never colour-decoded), or -1.
+int alpha_channel(const OIIO::ImageSpec& spec) {
+  if (spec.alpha_channel >= 0) return spec.alpha_channel;
+  if (spec.nchannels == 2 || spec.nchannels == 4) return spec.nchannels - 1;
+  return -1;
+}
+
+/// 1D resampling weights: for output i, contributions (source index, weight).
+struct Taps {
+  std::vector<std::size_t> offset;  // CSR offsets, size n_out + 1
+  std::vector<int> index;
+  std::vector<float> weight;
+};
+
+Taps make_taps(int n_in, int n_out) {
+  Taps t;
+  t.offset.push_back(0);
+  const double scale = double(n_in) / double(n_out);
+  for (int i = 0; i < n_out; ++i) {
+    if (scale > 1.0) {
+      // Shrinking: exact box filter (area average over the footprint).
+      const double a = i * scale, b = (i + 1) * scale;
+      const int j0 = int(std::floor(a)), j1 = std::min(n_in - 1, int(std::ceil(b)) - 1);
+      for (int j = j0; j <= j1; ++j) {
+        const double cover = std::min(b, double(j + 1)) - std::max(a, double(j));
+        if (cover <= 0) continue;
+        t.index.push_back(j);
+        t.weight.push_back(float(cover / scale));
+      }
+    } else {
+      // Enlarging (or same size): bilinear between pixel centres, clamped.
+      const double s = (i + 0.5) * scale - 0.5;
+      const int j0 = int(std::floor(s));
+      const double f = s - j0;
+      t.index.push_back(std::clamp(j0, 0, n_in - 1));
+      t.weight.push_back(float(1.0 - f));
+      t.index.push_back(std::clamp(j0 + 1, 0, n_in - 1));
+      t.weight.push_back(float(f));
+    }
+    t.offset.push_back(t.index.size());
+  }
+  return t;
+}
+
+void check_channels(const std::string& path, const Image& img) {
+  if (img.width <= 0 || img.height <= 0 || img.channels <= 0 ||
+      img.pixels.size() != std::size_t(img.width) * img.height * img.channels)
+    throw OutputError(path + ": cannot write an empty or inconsistent image");
+}
+
+// Writes `data` (already in the file's value range) through OIIO to tmp.
+void write_oiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
+                OIIO::TypeDesc data_type, const void* data) {
+  auto out = OIIO::ImageOutput::create(tmp);
+  if (!out) throw OutputError(path + ": " + one_line(OIIO::geterror()));
+  out->threads(thread_count());
+  if (!out->open(tmp, spec)) throw OutputError(path + ": cannot open for writing: " + one_line(out->geterror()));
+  if (!out->write_image(data_type, data)) {
+    const std::string err = one_line(out->geterror());
+    out->close();
+    throw OutputError(path + ": write failed: " + err);
+  }
+  if (!out->close()) throw OutputError(path + ": write failed: " + one_line(out->geterror()));
+}
+
+}  // namespace
+
+Image read_image(const std::string& path, ColorSpace space) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw InputError(path, "cannot read image: file does not exist");
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
+  const OIIO::ImageSpec spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw InputError(path, "image has no pixels");
+  if (spec.depth > 1) throw InputError(path, "volume images are not supported");
+  Image img(spec.width, spec.height, spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
+    throw InputError(path, "cannot read image: " + one_line(in->geterror()));
+  in->close();
+  for (float v : img.pixels)
+    if (!std::isfinite(v)) throw InputError(path, "image contains NaN or infinite values");
+
+  const bool decode = space == ColorSpace::sRGB || (space == ColorSpace::Auto && auto_is_srgb(spec));
+  if (decode) {
+    const int alpha = alpha_channel(spec);
+    const int ch = img.channels;
+    parallel_for(std::size_t(img.width) * img.height, [&](std::size_t b, std::size_t e) {
+      for (std::size_t p = b; p < e; ++p)
+        for (int c = 0; c < ch; ++c)
+          if (c != alpha) img.pixels[p * ch + c] = srgb_to_linear(img.pixels[p * ch + c]);
+    }, 4096);
+  }
+  return img;
+}
+
+std::vector<std::string> image_channel_names(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
+  return in->spec().channelnames;
+}
+
+Image resize_image(const Image& img, int width, int height) {
+  if (width <= 0 || height <= 0) throw std::invalid_argument("resize_image: size must be positive");
+  if (img.empty()) throw std::invalid_argument("resize_image: empty image");
+  if (width == img.width && height == img.height) return img;
+  const int ch = img.channels;
+  // Separable: horizontal pass into tmp (width x img.height), then vertical.
+  const Taps tx = make_taps(img.width, width), ty = make_taps(img.height, height);
+  Image tmp(width, img.height, ch);
+  parallel_for(std::size_t(img.height), [&](std::size_t b, std::size_t e) {
+    for (std::size_t y = b; y < e; ++y)
+      for (int x = 0; x < width; ++x)
+        for (int c = 0; c < ch; ++c) {
+          float acc = 0;
+          for (std::size_t k = tx.offset[x]; k < tx.offset[x + 1]; ++k)
+            acc += tx.weight[k] * img.at(tx.index[k], int(y), c);
+          tmp.at(x, int(y), c) = acc;
+        }
+  }, 8);
+  Image out(width, height, ch);
+  parallel_for(std::size_t(height), [&](std::size_t b, std::size_t e) {
+    for (std::size_t y = b; y < e; ++y)
+      for (int x = 0; x < width; ++x)
+        for (int c = 0; c < ch; ++c) {
+          float acc = 0;
+          for (std::size_t k = ty.offset[y]; k < ty.offset[y + 1]; ++k)
+            acc += ty.weight[k] * tmp.at(x, ty.index[k], c);
+          out.at(x, int(y), c) = acc;
+        }
+  }, 8);
+  return out;
+}
+
+void sample_bilinear(const Image& img, double u, double v, float* out) {
+  // Pixel centres sit at (i + 0.5) / size; v = 0 is the bottom row (row h-1).
+  const double fx = u * img.width - 0.5;
+  const double fy = (1.0 - v) * img.height - 0.5;
+  const double cx = std::clamp(fx, 0.0, double(img.width - 1));
+  const double cy = std::clamp(fy, 0.0, double(img.height - 1));
+  const int x0 = int(cx), y0 = int(cy);
+  const int x1 = std::min(x0 + 1, img.width - 1), y1 = std::min(y0 + 1, img.height - 1);
+  const float ax = float(cx - x0), ay = float(cy - y0);
+  for (int c = 0; c < img.channels; ++c) {
+    const float top = img.at(x0, y0, c) * (1 - ax) + img.at(x1, y0, c) * ax;
+    const float bottom = img.at(x0, y1, c) * (1 - ax) + img.at(x1, y1, c) * ax;
+    out[c] = top * (1 - ay) + bottom * ay;
+  }
+}
+
+void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
+               const ExrOptions& options) {
+  check_channels(path, img);
+  if (int(channel_names.size()) != img.channels)
+    throw std::invalid_argument(path + ": write_exr needs one channel name per channel");
+  OIIO::ImageSpec spec(img.width, img.height, img.channels,
+                       options.type == ExrPixelType::Half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+  spec.channelnames = channel_names;
+  spec.alpha_channel = -1;
+  for (int c = 0; c < img.channels; ++c)
+    if (channel_names[c] == "A") spec.alpha_channel = c;
+  const char* compression = "piz";
+  switch (options.compression) {
+    case ExrCompression::Piz: compression = "piz"; break;
+    case ExrCompression::Zip: compression = "zip"; break;
+    case ExrCompression::Dwaa: compression = "dwaa"; break;
+    case ExrCompression::None: compression = "none"; break;
+  }
+  spec.attribute("compression", compression);
+  spec.attribute("oiio:ColorSpace", "Linear");
+  spec.attribute("Software", "lapflow");
+  // OpenEXR keeps its own thread pool, separate from OIIO's "threads".
+  OIIO::attribute("exr_threads", thread_count());
+  write_atomically(path, [&](const std::string& tmp) {
+    write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
+  });
+}
+
+void write_png(const std::string& path, const Image& img, bool to_srgb, int bits) {
+  check_channels(path, img);
+  if (bits != 8 && bits != 16) throw std::invalid_argument(path + ": write_png supports 8 or 16 bits");
+  const int ch = img.channels;
+  const int alpha = (ch == 2 || ch == 4) ? ch - 1 : -1;
+  const float maxv = bits == 8 ? 255.f : 65535.f;
+  std::vector<uint16_t> data(img.pixels.size());
+  parallel_for(std::size_t(img.width) * img.height, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p)
+      for (int c = 0; c < ch; ++c) {
+        float x = std::clamp(img.pixels[p * ch + c], 0.f, 1.f);
+        if (to_srgb && c != alpha) x = linear_to_srgb(x);
+        data[p * ch + c] = uint16_t(std::lround(x * maxv));
+      }
+  }, 4096);
+  OIIO::ImageSpec spec(img.width, img.height, ch, bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+  spec.alpha_channel = alpha;
+  spec.attribute("oiio:ColorSpace", to_srgb ? "sRGB" : "Linear");
+  spec.attribute("Software", "lapflow");
+  if (bits == 8) {
+    std::vector<uint8_t> data8(data.begin(), data.end());
+    write_atomically(path, [&](const std::string& tmp) {
+      write_oiio(path, tmp, spec, OIIO::TypeDesc::UINT8, data8.data());
+    });
+  } else {
+    write_atomically(path, [&](const std::string& tmp) {
+      write_oiio(path, tmp, spec, OIIO::TypeDesc::UINT16, data.data());
+    });
+  }
+}
+
+}  // namespace lapflow

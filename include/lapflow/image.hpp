@@ -21,12 +21,14 @@ struct Image {
 enum class ColorSpace { Auto, sRGB, Linear };
 
 /// Reads any image OIIO can (PNG, JPEG, TIFF, EXR; 8/16/32 bit) into linear
-/// float. With Auto, 8/16-bit integer files and files tagged sRGB are decoded
-/// from sRGB; float files are taken as linear. Data maps (feature, height)
+/// float. With Auto, 8/16-bit integer files (unless tagged linear, as
+/// write_png(to_srgb = false) tags them) and files tagged sRGB are decoded
+/// from sRGB; float files are taken as linear; alpha is never decoded. Data maps (feature, height)
 /// should be read with ColorSpace::Linear. Throws InputError.
 Image read_image(const std::string& path, ColorSpace space = ColorSpace::Auto);
 
-/// Resamples to a new size (bilinear, box-filtered when shrinking).
+/// Resamples to a new size (bilinear, box-filtered when shrinking; separable,
+/// so each axis is treated on its own). Deterministic for any thread count.
 Image resize_image(const Image& img, int width, int height);
 
 /// Bilinear sample at (u, v) in [0,1]^2, v = 0 at the image's bottom row (uv
@@ -43,9 +45,15 @@ struct ExrOptions {
 /// atomically (temporary file, then rename). Throws OutputError.
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
                const ExrOptions& options = {});
-/// Writes an 8-bit PNG (values clamped to [0,1], encoded to sRGB when
-/// `to_srgb`), atomically.
-void write_png(const std::string& path, const Image& img, bool to_srgb);
+/// Writes a PNG (values clamped to [0,1], encoded to sRGB when `to_srgb`;
+/// alpha, the last of 2 or 4 channels, is never encoded), atomically.
+/// `bits` is 8 or 16 (16 for data maps: feature, displacement).
+void write_png(const std::string& path, const Image& img, bool to_srgb, int bits = 8);
+
+/// Channel names stored in an image file (e.g. {"R","G","B","A"} or
+/// {"patch_id","u","v","w"}), in the order read_image returns the channels.
+/// Throws InputError.
+std::vector<std::string> image_channel_names(const std::string& path);
 
 /// The texture an artist supplies: colour E, feature map F_m in [0,1],
 /// displacement H. All three have the same size.
