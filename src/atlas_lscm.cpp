@@ -1,1 +1,287 @@
-// placeholder: filled by its stage's work
+// LSCM of every atlas chart (Lévy et al. 2002) with Eigen: two pinned
+// vertices, the normal equations assembled from per-triangle 6x6 blocks and
+// solved with a sparse LDLT. Charts that flip a triangle or stretch too much
+// are split and redone, never dropped.
+#include <Eigen/Eigenvalues>
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "atlas_internal.hpp"
+#include "lapflow/parallel.hpp"
+
+namespace lapflow::atlas_detail {
+namespace {
+
+/// Largest share of a chart's area allowed outside the density band: the
+/// atlas must keep 95% of the surface in the band, so charts keep 98%.
+constexpr double kMaxOutsideShare = 0.02;
+
+/// LSCM of one chart; writes 3 uv per triangle of `tris` (chart-local,
+/// density-normalised) into corner_uv. Returns false when the chart must be
+/// split; `force` writes the best result anyway (a chart that cannot split).
+bool flatten_one(const TriMesh& mesh, const TriangleInfo& info, const std::vector<int32_t>& tris,
+                 double max_stretch, bool force, std::vector<Vec2>& corner_uv) {
+  std::vector<int32_t> verts;
+  verts.reserve(tris.size() * 3);
+  for (int32_t t : tris)
+    if (!info.degenerate[t])
+      for (int k = 0; k < 3; ++k) verts.push_back(mesh.triangles[t][k]);
+  std::sort(verts.begin(), verts.end());
+  verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+  const int nv = int(verts.size());
+  auto local = [&](int32_t v) { return int(std::lower_bound(verts.begin(), verts.end(), v) - verts.begin()); };
+
+  std::vector<Vec2> uv(nv);
+  if (nv >= 3) {
+    // Pins: the extreme vertices along the longest side of the chart's box.
+    Box3 box;
+    for (int32_t v : verts) box.extend(mesh.positions[v]);
+    const Vec3 size = box.size();
+    const int axis = size.x >= size.y && size.x >= size.z ? 0 : (size.y >= size.z ? 1 : 2);
+    int pa = 0, pb = 0;
+    for (int i = 1; i < nv; ++i) {
+      if (mesh.positions[verts[i]][axis] < mesh.positions[verts[pa]][axis]) pa = i;
+      if (mesh.positions[verts[i]][axis] > mesh.positions[verts[pb]][axis]) pb = i;
+    }
+    if (pa == pb) return true;  // cannot happen with a proper triangle; keep the point
+    uv[pa] = {0, 0};
+    uv[pb] = {norm(mesh.positions[verts[pb]] - mesh.positions[verts[pa]]), 0};
+    std::vector<int> var(nv);
+    {
+      int next = 0;
+      for (int i = 0; i < nv; ++i) var[i] = (i == pa || i == pb) ? -1 : 2 * next++;
+    }
+    const int n = 2 * (nv - 2);
+    std::vector<Eigen::Triplet<double>> trip;
+    trip.reserve(tris.size() * 21);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+    for (int32_t t : tris) {
+      if (info.degenerate[t]) continue;
+      const Tri& f = mesh.triangles[t];
+      const Vec3 p0 = mesh.positions[f[0]], p1 = mesh.positions[f[1]], p2 = mesh.positions[f[2]];
+      const Vec3 ex = normalized(p1 - p0);
+      const Vec3 ey = cross(info.normal[t], ex);
+      const Vec2 q[3] = {{0, 0}, {norm(p1 - p0), 0}, {dot(p2 - p0, ex), dot(p2 - p0, ey)}};
+      const double area = 0.5 * cross(q[1] - q[0], q[2] - q[0]);
+      if (!(area > 0)) continue;
+      const double k = 1.0 / (2.0 * std::sqrt(area));
+      // Cauchy-Riemann residual rot90(grad u) - grad v, weighted by sqrt(area):
+      // row x: sum -e.x u + e.y v; row y: sum -e.y u - e.x v, e = edge opposite.
+      double cx[6], cy[6];
+      int col[6], li[3];
+      for (int j = 0; j < 3; ++j) {
+        const Vec2 e = q[(j + 2) % 3] - q[(j + 1) % 3];
+        cx[2 * j] = -e.x * k, cx[2 * j + 1] = e.y * k;
+        cy[2 * j] = -e.y * k, cy[2 * j + 1] = -e.x * k;
+        li[j] = local(f[j]);
+        col[2 * j] = var[li[j]] < 0 ? -1 : var[li[j]];
+        col[2 * j + 1] = var[li[j]] < 0 ? -1 : var[li[j]] + 1;
+      }
+      double known_x = 0, known_y = 0;
+      for (int j = 0; j < 3; ++j)
+        if (var[li[j]] < 0) {
+          known_x += cx[2 * j] * uv[li[j]].x + cx[2 * j + 1] * uv[li[j]].y;
+          known_y += cy[2 * j] * uv[li[j]].x + cy[2 * j + 1] * uv[li[j]].y;
+        }
+      for (int a = 0; a < 6; ++a) {
+        if (col[a] < 0) continue;
+        rhs[col[a]] -= cx[a] * known_x + cy[a] * known_y;
+        for (int b = 0; b < 6; ++b)
+          if (col[b] >= 0 && col[b] <= col[a]) trip.emplace_back(col[a], col[b], cx[a] * cx[b] + cy[a] * cy[b]);
+      }
+    }
+    if (n > 0) {
+      Eigen::SparseMatrix<double> m(n, n);
+      m.setFromTriplets(trip.begin(), trip.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> solver(m);
+      if (solver.info() != Eigen::Success && !force) return false;
+      const Eigen::VectorXd x = solver.solve(rhs);
+      if ((solver.info() != Eigen::Success || !x.allFinite()) && !force) return false;
+      for (int i = 0; i < nv; ++i)
+        if (var[i] >= 0 && std::isfinite(x[var[i]]) && std::isfinite(x[var[i] + 1])) uv[i] = {x[var[i]], x[var[i] + 1]};
+    }
+  }
+
+  // Check flips and the spread of sqrt(area3D / areaUV), then normalise so the
+  // chart's area-weighted mean density is 1 (uv in metres).
+  double sum_a = 0, sum_as = 0;
+  std::vector<double> dens(tris.size(), 0);
+  for (std::size_t i = 0; i < tris.size(); ++i) {
+    const int32_t t = tris[i];
+    if (info.degenerate[t]) continue;
+    const Tri& f = mesh.triangles[t];
+    const Vec2 a = uv[local(f[0])], b = uv[local(f[1])], c = uv[local(f[2])];
+    const double auv = 0.5 * cross(b - a, c - a);
+    if (!(auv > 1e-14 * info.area[t])) {
+      if (!force) return false;  // flipped or collapsed
+      continue;
+    }
+    dens[i] = std::sqrt(info.area[t] / auv);
+    sum_a += info.area[t];
+    sum_as += info.area[t] * dens[i];
+  }
+  const double mean = sum_a > 0 ? sum_as / sum_a : 1.0;
+  double outside = 0;
+  for (std::size_t i = 0; i < tris.size(); ++i) {
+    const double d = dens[i] / mean;
+    if (!info.degenerate[tris[i]] && (d < 1.0 / max_stretch || d > max_stretch)) outside += info.area[tris[i]];
+  }
+  if (outside > kMaxOutsideShare * sum_a && !force) return false;
+
+  Vec2 centre{};
+  for (const Vec2& p : uv) centre += p;
+  if (nv > 0) centre = centre / double(nv);
+  for (std::size_t i = 0; i < tris.size(); ++i) {
+    const int32_t t = tris[i];
+    const Tri& f = mesh.triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      Vec2 p = centre;
+      if (info.degenerate[t]) {
+        // Collapse onto the first vertex that has a uv in this chart.
+        for (int j = 0; j < 3; ++j)
+          if (std::binary_search(verts.begin(), verts.end(), f[j])) {
+            p = uv[local(f[j])];
+            break;
+          }
+      } else {
+        p = uv[local(f[k])];
+      }
+      corner_uv[3 * std::size_t(t) + k] = (p - centre) * mean;
+    }
+  }
+  return true;
+}
+
+/// Splits a chart at the median of its triangles along their principal axis,
+/// then into edge-connected parts. Degenerate triangles follow a proper
+/// triangle sharing a vertex. Parts are ordered by their lowest triangle.
+std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const TriangleInfo& info,
+                                              const std::vector<int32_t>& tris) {
+  std::vector<int32_t> proper;
+  for (int32_t t : tris)
+    if (!info.degenerate[t]) proper.push_back(t);
+  if (proper.size() < 2) return {tris};
+  auto centroid = [&](int32_t t) {
+    const Tri& f = mesh.triangles[t];
+    return (mesh.positions[f[0]] + mesh.positions[f[1]] + mesh.positions[f[2]]) / 3.0;
+  };
+  Vec3 mean{};
+  for (int32_t t : proper) mean += centroid(t);
+  mean = mean / double(proper.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (int32_t t : proper) {
+    const Vec3 d = centroid(t) - mean;
+    const Eigen::Vector3d v(d.x, d.y, d.z);
+    cov += v * v.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  const Eigen::Vector3d ax = eig.eigenvectors().col(2);
+  const Vec3 axis{ax.x(), ax.y(), ax.z()};
+  std::vector<std::pair<double, int32_t>> proj;
+  proj.reserve(proper.size());
+  for (int32_t t : proper) proj.emplace_back(dot(centroid(t) - mean, axis), t);
+  std::sort(proj.begin(), proj.end());
+  // side: 0/1 by the median; label holds part ids after the flood fill.
+  std::vector<std::pair<int32_t, int>> side;  // (triangle, side) sorted by triangle
+  side.reserve(proper.size());
+  for (std::size_t i = 0; i < proj.size(); ++i) side.emplace_back(proj[i].second, i < proj.size() / 2 ? 0 : 1);
+  std::sort(side.begin(), side.end());
+  auto find = [&](int32_t t) {
+    auto it = std::lower_bound(side.begin(), side.end(), std::make_pair(t, -1));
+    return (it != side.end() && it->first == t) ? int(it - side.begin()) : -1;
+  };
+  std::vector<int> part(side.size(), -1);
+  int parts = 0;
+  std::vector<int> stack;
+  for (std::size_t s = 0; s < side.size(); ++s) {
+    if (part[s] >= 0) continue;
+    part[s] = parts;
+    stack.assign(1, int(s));
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        const int32_t u = info.across[3 * std::size_t(side[i].first) + k];
+        if (u < 0) continue;
+        const int j = find(u);
+        if (j < 0 || part[j] >= 0 || side[j].second != side[i].second) continue;
+        part[j] = parts;
+        stack.push_back(j);
+      }
+    }
+    ++parts;
+  }
+  std::vector<std::vector<int32_t>> out(parts);
+  for (std::size_t s = 0; s < side.size(); ++s) out[part[s]].push_back(side[s].first);
+  for (int32_t t : tris) {
+    if (!info.degenerate[t]) continue;
+    const Tri& f = mesh.triangles[t];
+    int target = 0;
+    for (std::size_t s = 0; s < side.size(); ++s) {
+      const Tri& a = mesh.triangles[side[s].first];
+      bool shares = false;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) shares = shares || a[i] == f[j];
+      if (shares) {
+        target = part[s];
+        break;
+      }
+    }
+    out[target].push_back(t);
+  }
+  for (auto& p : out) std::sort(p.begin(), p.end());
+  return out;
+}
+
+}  // namespace
+
+std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, Charts& charts,
+                                 double max_stretch, double max_chart_area) {
+  std::vector<Vec2> corner_uv(3 * mesh.triangle_count());
+  std::vector<std::vector<int32_t>> lists(charts.count);
+  for (int c = 0; c < charts.count; ++c)
+    lists[c].assign(charts.triangles.begin() + charts.offsets[c], charts.triangles.begin() + charts.offsets[c + 1]);
+  std::vector<int32_t> pending(charts.count);
+  std::iota(pending.begin(), pending.end(), 0);
+  // Rounds: flatten all pending charts in parallel, then split the failures
+  // in chart order (new charts appended), so ids do not depend on threads.
+  for (int round = 0; !pending.empty(); ++round) {
+    std::vector<uint8_t> ok(pending.size(), 1);
+    parallel_for(pending.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        double area = 0;
+        for (int32_t t : lists[pending[i]]) area += info.area[t];
+        ok[i] = area <= max_chart_area && flatten_one(mesh, info, lists[pending[i]], max_stretch, false, corner_uv);
+      }
+    }, 1);
+    std::vector<int32_t> next;
+    for (std::size_t i = 0; i < pending.size(); ++i) {
+      if (ok[i]) continue;
+      const int32_t c = pending[i];
+      auto parts = split_chart(mesh, info, lists[c]);
+      if (parts.size() < 2 || round >= 64) {
+        // A single proper triangle always flattens exactly; this keeps the
+        // loop finite on pathological input by accepting the best we have.
+        flatten_one(mesh, info, lists[c], max_stretch, true, corner_uv);
+        continue;
+      }
+      lists[c] = std::move(parts[0]);
+      next.push_back(c);
+      for (std::size_t p = 1; p < parts.size(); ++p) {
+        next.push_back(int32_t(lists.size()));
+        lists.push_back(std::move(parts[p]));
+      }
+    }
+    pending = std::move(next);
+  }
+  charts.count = int(lists.size());
+  for (int c = 0; c < charts.count; ++c)
+    for (int32_t t : lists[c]) charts.chart_of_triangle[t] = c;
+  charts.rebuild_csr(mesh.triangle_count());
+  return corner_uv;
+}
+
+}  // namespace lapflow::atlas_detail

@@ -1,1 +1,108 @@
-// placeholder: filled by its stage's work
+// The surface atlas of one frame (ALGORITHM.md step 6): charts, LSCM,
+// packing, texel map, each stage timed for the report.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "atlas_internal.hpp"
+#include "lapflow/atlas.hpp"
+#include "lapflow/errors.hpp"
+
+namespace lapflow {
+namespace {
+
+/// No chart may exceed this share of the surface: a handful of huge charts
+/// leaves large empty corners in the square however they are packed.
+constexpr double kMinChartsForPacking = 16;
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point& t) {
+  const Clock::time_point now = Clock::now();
+  const double s = std::chrono::duration<double>(now - t).count();
+  t = now;
+  return s;
+}
+
+/// Density figures of the final atlas: sqrt(area3D / areaUV) per triangle,
+/// normalised by its area-weighted mean, weighted by 3D area.
+void measure_density(const TriMesh& mesh, const atlas_detail::TriangleInfo& info, const std::vector<Vec2>& uv,
+                     AtlasReport& report) {
+  std::vector<std::pair<double, double>> dens;  // (density, area)
+  dens.reserve(mesh.triangle_count());
+  double sum_a = 0, sum_ad = 0;
+  report.flipped_triangles = 0;
+  for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+    if (info.degenerate[t]) continue;
+    const double auv = 0.5 * cross(uv[3 * t + 1] - uv[3 * t], uv[3 * t + 2] - uv[3 * t]);
+    if (!(auv > 0)) {
+      ++report.flipped_triangles;
+      continue;
+    }
+    const double d = std::sqrt(info.area[t] / auv);
+    dens.emplace_back(d, info.area[t]);
+    sum_a += info.area[t];
+    sum_ad += info.area[t] * d;
+  }
+  if (dens.empty() || !(sum_a > 0)) {
+    report.density_p95_low = report.density_p95_high = report.area_in_density_bounds = 1;
+    return;
+  }
+  const double mean = sum_ad / sum_a;
+  double inside = 0;
+  for (auto& [d, a] : dens) {
+    d /= mean;
+    if (d >= 0.8 && d <= 1.25) inside += a;
+  }
+  report.area_in_density_bounds = inside / sum_a;
+  std::sort(dens.begin(), dens.end());
+  double acc = 0;
+  report.density_p95_low = dens.front().first;
+  report.density_p95_high = dens.back().first;
+  bool low_set = false;
+  for (const auto& [d, a] : dens) {
+    acc += a;
+    if (!low_set && acc >= 0.025 * sum_a) report.density_p95_low = d, low_set = true;
+    if (acc >= 0.975 * sum_a) {
+      report.density_p95_high = d;
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& options) {
+  if (options.resolution < 1 || options.resolution > 65536)
+    throw UsageError("atlas resolution must be between 1 and 65536 texels, got " + std::to_string(options.resolution));
+  if (options.gutter < 0) throw UsageError("atlas gutter must be >= 0 texels, got " + std::to_string(options.gutter));
+  if (!(options.max_stretch > 1)) throw UsageError("atlas max_stretch must be > 1");
+
+  SurfaceAtlas atlas;
+  atlas.resolution = options.resolution;
+  Clock::time_point clock = Clock::now();
+
+  const atlas_detail::TriangleInfo info = atlas_detail::analyze_triangles(mesh);
+  atlas_detail::Charts charts = atlas_detail::segment_charts(mesh, info, atlas_detail::ChartOptions{});
+  atlas.report.seconds_charts = seconds_since(clock);
+
+  double total_area = 0;
+  for (double a : info.area) total_area += a;
+  const double max_chart_area = total_area / kMinChartsForPacking;
+  atlas.corner_uv = atlas_detail::flatten_charts(mesh, info, charts, options.max_stretch, max_chart_area);
+  atlas.report.seconds_lscm = seconds_since(clock);
+
+  atlas_detail::pack_charts(charts, options.resolution, options.gutter, atlas.corner_uv);
+  atlas.report.seconds_pack = seconds_since(clock);
+
+  atlas.texels = atlas_detail::build_texel_map(atlas.corner_uv, options.resolution);
+  atlas.report.seconds_texels = seconds_since(clock);
+
+  atlas.chart_of_triangle = std::move(charts.chart_of_triangle);
+  atlas.chart_count = charts.count;
+  atlas.report.charts = charts.count;
+  atlas.report.utilization = double(atlas.texels.size()) / (double(options.resolution) * options.resolution);
+  measure_density(mesh, info, atlas.corner_uv, atlas.report);
+  return atlas;
+}
+
+}  // namespace lapflow

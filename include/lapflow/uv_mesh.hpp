@@ -1,0 +1,30 @@
+#pragma once
+/// \file uv_mesh.hpp The fluid mesh with its per-corner atlas UVs as OBJ + MTL,
+/// the file renderers load next to the colour and displacement atlases.
+#include <string>
+
+#include "lapflow/atlas.hpp"
+#include "lapflow/mesh.hpp"
+
+namespace lapflow {
+
+/// What the MTL names. Texture paths are written as given (relative to the
+/// MTL's folder, as renderers resolve them); an empty path omits the line.
+struct UvMeshMaterial {
+  std::string name = "lapflow_atlas";  ///< `newmtl` / `usemtl` name
+  std::string color_texture;           ///< `map_Kd`: the colour atlas
+  std::string displacement_texture;    ///< `disp` and `map_disp`: the displacement atlas
+};
+
+/// The MTL written beside an OBJ: the OBJ path with its extension replaced by `.mtl`.
+std::string uv_mesh_mtl_path(const std::string& obj_path);
+
+/// Writes `obj_path` and its MTL (uv_mesh_mtl_path), both atomically.
+/// `v` lines are the source vertices in order (output vertex i is source
+/// vertex i, so provenance is the index); one `vt` per distinct (vertex,
+/// chart, uv) corner; `vn` per vertex (area-weighted); `f v/vt/vn` per
+/// triangle in source order. Throws OutputError when a file cannot be written.
+void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const SurfaceAtlas& atlas,
+                       const UvMeshMaterial& material);
+
+}  // namespace lapflow
