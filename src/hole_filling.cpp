@@ -40,6 +40,10 @@ std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const P
     patches.patches.push_back(std::move(*patch));
     ++born;
     rasterize_patch(ctx, patches.patches.back(), patches.patches.size() - 1, counters);
+    // A newborn that does not keep its own seed texel (a maker that breaks
+    // B_V = 1 near the centre) would be followed by one more per texel of the
+    // hole: leave that triangle's texels to propagate_keys instead.
+    if (ctx.keys[i] == kNoKey) failed.insert(F);
   }
   return born;
 }

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <stdexcept>
 
@@ -231,6 +232,94 @@ void setup_context(RasterContext& ctx) {
     for (int k = 0; k < 3; ++k) ctx.vt_list[fill[mesh.triangles[t][k]]++] = int32_t(t);
 }
 
+namespace {
+
+// One patch triangle drawn in its chart: pixel-space barycentrics, rest uv, w.
+struct ChartTriangle {
+  int32_t index;  // in the patch
+  int32_t chart;
+  Bary bary;
+  Vec2 uv[3];
+  float w[3];
+  int x0, y0, x1, y1;  // pixel bbox, clamped to the atlas
+};
+
+// The in-chart triangles of one patch and chart: first each pixel of their
+// joint bounding box learns the lowest-index triangle covering it (a small
+// buffer in cache), then one row-ordered sweep does the erosion test and the
+// atomic min. Row order keeps the index, key and texel arrays streaming
+// instead of hopping N texels at every triangle row.
+void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTriangle* tris, std::size_t count,
+                      std::vector<int32_t>& local) {
+  int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
+  for (std::size_t k = 0; k < count; ++k) {
+    bx0 = std::min(bx0, tris[k].x0), by0 = std::min(by0, tris[k].y0);
+    bx1 = std::max(bx1, tris[k].x1), by1 = std::max(by1, tris[k].y1);
+  }
+  if (bx0 > bx1 || by0 > by1) return;
+  const std::size_t W = std::size_t(bx1 - bx0 + 1), H = std::size_t(by1 - by0 + 1);
+  // A patch whose pieces lie far apart in one chart would make the joint box
+  // huge: draw its triangles one by one instead.
+  std::size_t area = 0;
+  for (std::size_t k = 0; k < count; ++k)
+    area += std::size_t(tris[k].x1 - tris[k].x0 + 1) * std::size_t(tris[k].y1 - tris[k].y0 + 1);
+  if (W * H > 16 * area + 4096) {
+    const int chart = tris[0].chart;
+    const auto& tri_of = ctx.atlas.texels.triangle;
+    const auto& chart_of = ctx.atlas.chart_of_triangle;
+    for (std::size_t k = 0; k < count; ++k) {
+      const ChartTriangle& t = tris[k];
+      const Vec2 P[3] = {t.bary.p0, t.bary.p0 + t.bary.e1, t.bary.p0 + t.bary.e2};
+      draw_triangle(ctx, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
+                    [&](int32_t idx) { return chart_of[tri_of[idx]] == chart; });
+    }
+    return;
+  }
+  local.assign(W * H, -1);
+  for (std::size_t k = 0; k < count; ++k) {
+    const ChartTriangle& t = tris[k];
+    for (int y = t.y0; y <= t.y1; ++y) {
+      int32_t* row = &local[std::size_t(y - by0) * W - bx0];
+      for (int x = t.x0; x <= t.x1; ++x) {
+        if (row[x] >= 0) continue;
+        double l0, l1, l2;
+        t.bary.at(x, y, l0, l1, l2);
+        if (l0 >= -kInsideTol && l1 >= -kInsideTol && l2 >= -kInsideTol) row[x] = int32_t(k);
+      }
+    }
+  }
+  const int chart = tris[0].chart;
+  const auto& tri_of = ctx.atlas.texels.triangle;
+  const auto& chart_of = ctx.atlas.chart_of_triangle;
+  const std::size_t N = std::size_t(ctx.N);
+  for (int y = by0; y <= by1; ++y) {
+    const int32_t* lrow = &local[std::size_t(y - by0) * W - bx0];
+    const int32_t* irow = &ctx.index[std::size_t(y) * N];
+    for (int x = bx0; x <= bx1; ++x) {
+      const int32_t k = lrow[x];
+      if (k < 0) continue;
+      const int32_t idx = irow[x];
+      if (idx < 0) continue;
+      const ChartTriangle& t = tris[k];
+      const uint64_t key = make_key(patch_index, std::size_t(t.index));
+      std::atomic_ref<uint64_t> slot(ctx.keys[idx]);
+      uint64_t cur = slot.load(std::memory_order_relaxed);
+      if (cur <= key) continue;
+      if (chart_of[tri_of[idx]] != chart) continue;
+      double l0, l1, l2;
+      t.bary.at(x, y, l0, l1, l2);
+      const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
+      const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
+      const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
+      if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
+      while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
+      }
+    }
+  }
+}
+
+}  // namespace
+
 void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters) {
   const std::size_t nv = patch.positions.size();
   if (patch.rest_uv.size() != nv) return;
@@ -243,6 +332,8 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
     vok[v] = vtri[v] >= 0 && to_pixels(ctx, vtri[v], patch.positions[v], vpix[v]);
   }
   std::vector<int32_t> scratch;
+  std::vector<ChartTriangle> in_chart;
+  in_chart.reserve(patch.triangles.size());
   const int Nm1 = ctx.N - 1;
   for (std::size_t ti = 0; ti < patch.triangles.size(); ++ti) {
     const Tri& t = patch.triangles[ti];
@@ -250,23 +341,35 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
       ++counters.distorted_triangles;
       continue;
     }
-    const uint64_t key = make_key(patch_index, ti);
     const int c0 = vok[t[0]] ? ctx.atlas.chart_of_triangle[vtri[t[0]]] : -1;
     const bool same_chart = c0 >= 0 && vok[t[1]] && vok[t[2]] && ctx.atlas.chart_of_triangle[vtri[t[1]]] == c0 &&
                             ctx.atlas.chart_of_triangle[vtri[t[2]]] == c0;
     if (same_chart) {
+      ChartTriangle ct;
+      ct.index = int32_t(ti);
+      ct.chart = c0;
       const Vec2 P[3] = {vpix[t[0]], vpix[t[1]], vpix[t[2]]};
-      const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
-      const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
-      const auto& tri_of = ctx.atlas.texels.triangle;
-      const auto& chart_of = ctx.atlas.chart_of_triangle;
-      draw_triangle(ctx, P, uv, w, key, 0, 0, Nm1, Nm1,
-                    [&](int32_t idx) { return chart_of[tri_of[idx]] == c0; });
+      if (!ct.bary.init(P)) continue;
+      for (int k = 0; k < 3; ++k) ct.uv[k] = patch.rest_uv[t[k]], ct.w[k] = vertex_weight(patch, t[k]);
+      ct.x0 = std::max(0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
+      ct.x1 = std::min(Nm1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
+      ct.y0 = std::max(0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
+      ct.y1 = std::min(Nm1, int(std::floor(std::max({P[0].y, P[1].y, P[2].y}) + 1e-7)));
+      if (ct.x0 <= ct.x1 && ct.y0 <= ct.y1) in_chart.push_back(ct);
     } else {
       ++counters.seam_triangles;
       const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
-      draw_seam_triangle(ctx, patch, int(ti), vt, key, scratch);
+      draw_seam_triangle(ctx, patch, int(ti), vt, make_key(patch_index, ti), scratch);
     }
+  }
+  // Group by chart (stable: triangle order kept inside a chart).
+  std::stable_sort(in_chart.begin(), in_chart.end(),
+                   [](const ChartTriangle& a, const ChartTriangle& b) { return a.chart < b.chart; });
+  for (std::size_t b = 0; b < in_chart.size();) {
+    std::size_t e = b;
+    while (e < in_chart.size() && in_chart[e].chart == in_chart[b].chart) ++e;
+    draw_chart_group(ctx, patch_index, &in_chart[b], e - b, scratch);
+    b = e;
   }
 }
 

@@ -1,0 +1,21 @@
+#pragma once
+// Sections of the lapflow benchmark program (lapflow_bench), one function per
+// stage family, each in its own tools/bench_*.cpp.
+#include <string>
+#include <vector>
+
+namespace lapflow::bench {
+
+/// Rasterizer alone (tools/bench_raster.cpp): a plane of 2 * grid_cells^2
+/// fluid triangles covered by about `target_patches` patches, one atlas per
+/// resolution in `resolutions` (texels per side). threads = 0: all cores.
+void bench_raster(const std::vector<int>& resolutions, int grid_cells = 224, int target_patches = 5000,
+                  int threads = 0);
+
+/// Patches (issue 3, tools/bench_patches.cpp): advect + project about 1M
+/// patch vertices, create + remesh + flatten one ~200-triangle patch, seed a
+/// ~100k-triangle frame with ~5k patches. Uses `data_dir`/dam_break when
+/// present, synthetic meshes otherwise. Prints one line per measurement.
+void bench_patches(const std::string& data_dir);
+
+}  // namespace lapflow::bench
