@@ -20,8 +20,9 @@ void init_openvdb() {
 template <typename GridT>
 Vec3 sample_grid(const GridT& grid, const Vec3& p) {
   // A fresh accessor per call: no shared cache, so concurrent calls are safe,
-  // and the 8 lookups of one trilinear sample still share its cache.
-  const auto acc = grid.getConstAccessor();
+  // and the 8 lookups of one trilinear sample still share its cache. The
+  // unregistered kind skips a global registry lock; the grid never changes.
+  const auto acc = grid.getConstUnsafeAccessor();
   typename GridT::ValueType v;
   openvdb::tools::BoxSampler::sample(acc, grid.transform().worldToIndex(openvdb::Vec3d(p.x, p.y, p.z)), v);
   return {double(v[0]), double(v[1]), double(v[2])};

@@ -1,5 +1,6 @@
 // Every malformed input gets one InputError naming the file, the element and
 // what is wrong; legal oddities (an empty frame) are not errors.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,6 +10,7 @@
 #include "io_test_helpers.hpp"
 #include "lapflow/errors.hpp"
 #include "lapflow/mesh_io.hpp"
+#include "lapflow/parallel.hpp"
 #include "lapflow/velocity.hpp"
 
 using namespace lapflow;
@@ -221,4 +223,48 @@ TEST(BadInput, VdbWithoutTheNamedGridListsTheGridsItHas) {
   const std::string vdb = dir + "/dam_break/dam_break.0001.vdb";
   expect_input_error([&] { VelocityGrid(vdb, "vel"); }, vdb, {"no vector grid named 'vel'", "velocity (vec3s)"});
   EXPECT_EQ(VelocityGrid(vdb).grid_name(), "velocity");  // found by the default search
+}
+
+TEST(BadInput, RandomCorruptionsEitherReadOrThrowInputError) {
+  // Truncation at every length and random byte changes of a PLY (binary and
+  // ASCII) and an OBJ: the reader returns a consistent mesh or one InputError.
+  TempDir tmp("bad");
+  std::string ascii = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                      "property float vx\nproperty float vy\nproperty float vz\nelement face 4\n"
+                      "property list uchar int vertex_indices\nend_header\n";
+  for (std::size_t i = 0; i < kPos.size(); ++i)
+    ascii += fmt::format("{} {} {} 0 0 1\n", kPos[i].x, kPos[i].y, kPos[i].z);
+  for (const Tri& f : kFaces) ascii += fmt::format("3 {} {} {}\n", f[0], f[1], f[2]);
+  const std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf -4 -1 -2\nf 2/1 3/2 4/3\n";
+  const std::pair<std::string, std::string> sources[] = {
+      {"f.ply", tetra_ply(4, 4, kPos, kVel, kFaces)}, {"f.ply", ascii}, {"f.obj", obj}};
+  int errors = 0, reads = 0;
+  auto check = [&](const std::string& name, const std::string& bytes) {
+    const std::string path = tmp / name;
+    test::write_bytes(path, bytes);
+    try {
+      const TriMesh m = read_mesh(path);
+      for (const Tri& f : m.triangles)
+        for (int32_t x : f) ASSERT_TRUE(x >= 0 && x < int32_t(m.vertex_count()));
+      for (const Vec3& p : m.positions) ASSERT_TRUE(is_finite(p));
+      if (m.has_velocities()) ASSERT_EQ(m.velocities.size(), m.positions.size());
+      ++reads;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), path);
+      ++errors;
+    }
+  };
+  for (const auto& [name, bytes] : sources) {
+    for (std::size_t n = 0; n < bytes.size(); ++n) check(name, bytes.substr(0, n));
+    for (uint64_t k = 0; k < 150; ++k) {
+      std::string b = bytes;
+      for (int j = 0; j < 3; ++j) {
+        const uint64_t h = hash64(k, j, bytes.size());
+        b[h % b.size()] = char(h >> 40);
+      }
+      check(name, b);
+    }
+  }
+  EXPECT_GT(errors, 100);
+  EXPECT_GT(reads, 3);
 }

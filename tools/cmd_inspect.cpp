@@ -217,7 +217,7 @@ void print_summary(const InspectOptions& o, const std::vector<FrameResult>& resu
              s.frames_with_non_manifold.empty() ? "" : " in frames " + frame_list(s.frames_with_non_manifold));
   fmt::print("  boundary edges    {}{}\n", s.boundary,
              s.frames_with_boundary.empty() ? " (all surfaces closed)" : " in frames " + frame_list(s.frames_with_boundary));
-  fmt::print("  degenerate tris   {} (legal; skipped where they would divide by zero)\n", s.degenerate);
+  fmt::print("  degenerate tris   {} (legal)\n", s.degenerate);
   fmt::print("  isolated vertices {}\n", s.isolated);
   fmt::print("  bounding box      {}\n", box_text(s.bounds));
   const bool any_grid = std::any_of(results.begin(), results.end(), [](const FrameResult& r) { return r.grid_speed.present; });
