@@ -124,7 +124,11 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
 Image read_image(const std::string& path, ColorSpace space) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw InputError(path, "cannot read image: file does not exist");
-  auto in = OIIO::ImageInput::open(path);
+  // Keep colour and alpha as stored (no premultiplication of PNG/TIFF
+  // colour): exemplars drop alpha, and sRGB decoding needs the unscaled value.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(path, &config);
   if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
   const OIIO::ImageSpec spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
@@ -249,6 +253,8 @@ void write_png(const std::string& path, const Image& img, bool to_srgb, int bits
   }, 4096);
   OIIO::ImageSpec spec(img.width, img.height, ch, bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
   spec.alpha_channel = alpha;
+  // Our colour is not premultiplied: store it as is, as PNG expects.
+  spec.attribute("oiio:UnassociatedAlpha", 1);
   spec.attribute("oiio:ColorSpace", to_srgb ? "sRGB" : "Linear");
   spec.attribute("Software", "lapflow");
   if (bits == 8) {

@@ -1,0 +1,273 @@
+// Image I/O: EXR and PNG round trips through OpenImageIO, colour spaces,
+// bilinear sampling conventions, resampling, exemplar loading and its errors,
+// atomic writes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/errors.hpp"
+#include "lapflow/image.hpp"
+
+namespace lapflow {
+namespace {
+namespace fs = std::filesystem;
+using test::TempDir;
+
+float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
+
+/// Deterministic test pattern with values outside [0,1] too (EXR is HDR).
+Image pattern(int w, int h, int c, float lo = -2.f, float hi = 40.f) {
+  Image img(w, h, c);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i)
+    img.pixels[i] = lo + (hi - lo) * float((i * 7919) % 1000) / 999.f;
+  return img;
+}
+
+std::vector<std::string> files_in(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+TEST(ImageIo, ExrHalfRoundTripWithinHalfPrecision) {
+  TempDir dir("image");
+  const Image img = pattern(13, 7, 4);
+  for (ExrCompression comp : {ExrCompression::Piz, ExrCompression::Zip, ExrCompression::None}) {
+    const std::string path = dir / "rgba.exr";
+    write_exr(path, img, {"R", "G", "B", "A"}, {ExrPixelType::Half, comp});
+    const Image back = read_image(path);  // float files: never sRGB-decoded
+    ASSERT_EQ(back.width, 13);
+    ASSERT_EQ(back.height, 7);
+    ASSERT_EQ(back.channels, 4);
+    for (std::size_t i = 0; i < img.pixels.size(); ++i)
+      EXPECT_NEAR(back.pixels[i], img.pixels[i], std::abs(img.pixels[i]) * 1e-3 + 1e-4) << "index " << i;
+  }
+}
+
+TEST(ImageIo, ExrFloatIsExactAndDwaaIsClose) {
+  TempDir dir("image");
+  const Image img = pattern(64, 32, 3, 0.f, 1.f);
+  write_exr(dir / "f.exr", img, {"R", "G", "B"}, {ExrPixelType::Float, ExrCompression::Zip});
+  EXPECT_EQ(read_image(dir / "f.exr").pixels, img.pixels);
+  write_exr(dir / "d.exr", img, {"R", "G", "B"}, {ExrPixelType::Half, ExrCompression::Dwaa});
+  const Image lossy = read_image(dir / "d.exr");
+  double err = 0;
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) err += std::abs(lossy.pixels[i] - img.pixels[i]);
+  EXPECT_LT(err / double(img.pixels.size()), 0.05);  // lossy, but the same image
+}
+
+TEST(ImageIo, ExrChannelNamesAndOrderPreserved) {
+  TempDir dir("image");
+  // The AOV layout of the bake: float ids and coordinates, not colour.
+  Image aov = pattern(9, 5, 4, -1.f, 5000.f);
+  write_exr(dir / "aov.exr", aov, {"patch_id", "u", "v", "w"}, {ExrPixelType::Float, ExrCompression::Piz});
+  EXPECT_EQ(image_channel_names(dir / "aov.exr"), (std::vector<std::string>{"patch_id", "u", "v", "w"}));
+  EXPECT_EQ(read_image(dir / "aov.exr").pixels, aov.pixels);
+
+  Image disp = pattern(9, 5, 1);
+  write_exr(dir / "disp.exr", disp, {"Y"});
+  EXPECT_EQ(image_channel_names(dir / "disp.exr"), std::vector<std::string>{"Y"});
+  EXPECT_EQ(read_image(dir / "disp.exr").channels, 1);
+}
+
+TEST(ImageIo, PngSrgbRoundTrip) {
+  TempDir dir("image");
+  // Linear values that are exact 8-bit sRGB codes survive encode + decode.
+  Image img(256, 1, 3);
+  for (int x = 0; x < 256; ++x)
+    for (int c = 0; c < 3; ++c) img.at(x, 0, c) = srgb_to_linear(float((x + 85 * c) % 256) / 255.f);
+  write_png(dir / "c.png", img, true);
+  const Image back = read_image(dir / "c.png");  // 8-bit, tagged sRGB: decoded
+  ASSERT_EQ(back.channels, 3);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) EXPECT_NEAR(back.pixels[i], img.pixels[i], 1e-5) << i;
+
+  // Known answer: linear 0.5 is sRGB code 188; Linear reading returns the code.
+  Image grey(1, 1, 1, 0.5f);
+  write_png(dir / "g.png", grey, true);
+  EXPECT_NEAR(read_image(dir / "g.png", ColorSpace::Linear).pixels[0], 188.f / 255.f, 1e-6);
+  EXPECT_NEAR(read_image(dir / "g.png", ColorSpace::Auto).pixels[0], srgb_to_linear(188.f / 255.f), 1e-6);
+}
+
+TEST(ImageIo, Png16BitDataMapsStayLinear) {
+  TempDir dir("image");
+  Image map(40, 3, 1);
+  for (int x = 0; x < 40; ++x)
+    for (int y = 0; y < 3; ++y) map.at(x, y, 0) = float(x * 3 + y) / 119.f;
+  write_png(dir / "f.png", map, false, 16);
+  // Tagged linear by the writer, so even Auto does not decode it.
+  for (ColorSpace cs : {ColorSpace::Linear, ColorSpace::Auto}) {
+    const Image back = read_image(dir / "f.png", cs);
+    for (std::size_t i = 0; i < map.pixels.size(); ++i) EXPECT_NEAR(back.pixels[i], map.pixels[i], 1.0 / 65535) << i;
+  }
+}
+
+TEST(ImageIo, SampleBilinearHasVZeroAtTheBottomRow) {
+  Image img(2, 2, 1);
+  img.at(0, 0, 0) = 0;  // top left
+  img.at(1, 0, 0) = 1;  // top right
+  img.at(0, 1, 0) = 2;  // bottom left
+  img.at(1, 1, 0) = 3;  // bottom right
+  float v = 0;
+  sample_bilinear(img, 0.25, 0.25, &v);  // bottom-left pixel centre
+  EXPECT_FLOAT_EQ(v, 2);
+  sample_bilinear(img, 0.75, 0.75, &v);  // top-right pixel centre
+  EXPECT_FLOAT_EQ(v, 1);
+  sample_bilinear(img, 0.5, 0.5, &v);
+  EXPECT_FLOAT_EQ(v, 1.5);
+  sample_bilinear(img, 0.5, 0.25, &v);  // halfway along the bottom row
+  EXPECT_FLOAT_EQ(v, 2.5);
+  sample_bilinear(img, -3, -3, &v);  // clamped to the bottom-left corner
+  EXPECT_FLOAT_EQ(v, 2);
+  sample_bilinear(img, 2, 2, &v);
+  EXPECT_FLOAT_EQ(v, 1);
+}
+
+TEST(ImageIo, ResizeKnownAnswers) {
+  // Halving is an exact 2x2 box average.
+  Image img(4, 2, 1);
+  for (int x = 0; x < 4; ++x) {
+    img.at(x, 0, 0) = float(x);
+    img.at(x, 1, 0) = float(10 + x);
+  }
+  const Image half = resize_image(img, 2, 1);
+  EXPECT_FLOAT_EQ(half.at(0, 0, 0), (0 + 1 + 10 + 11) / 4.f);
+  EXPECT_FLOAT_EQ(half.at(1, 0, 0), (2 + 3 + 12 + 13) / 4.f);
+  // Enlarging a constant stays constant; a ramp stays monotone with the same mean.
+  const Image flat = resize_image(Image(3, 3, 2, 0.25f), 7, 5);
+  for (float p : flat.pixels) EXPECT_FLOAT_EQ(p, 0.25f);
+  Image ramp(4, 1, 1);
+  for (int x = 0; x < 4; ++x) ramp.at(x, 0, 0) = float(x);
+  const Image big = resize_image(ramp, 16, 1);
+  double mean = 0;
+  for (int x = 0; x < 16; ++x) {
+    mean += big.at(x, 0, 0) / 16.0;
+    if (x > 0) EXPECT_GE(big.at(x, 0, 0), big.at(x - 1, 0, 0));
+  }
+  EXPECT_NEAR(mean, 1.5, 1e-6);
+}
+
+TEST(Exemplar, LoadsAndResamplesMapsOfTheSameAspect) {
+  TempDir dir("exemplar");
+  Image color(64, 32, 4, 0.5f);  // RGBA colour: alpha dropped
+  for (int x = 0; x < 64; ++x) color.at(x, 3, 0) = 1.f;
+  write_png(dir / "rock.color.png", color, true);
+  Image feature(32, 16, 1);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 32; ++x) feature.at(x, y, 0) = float(x) / 31.f;
+  write_png(dir / "rock.feature.png", feature, false, 16);
+  testing::internal::CaptureStderr();
+  const Exemplar ex = load_exemplar(dir / "rock.color.png", dir / "rock.feature.png");
+  const std::string warning = testing::internal::GetCapturedStderr();
+  EXPECT_NE(warning.find("warning"), std::string::npos);
+  EXPECT_NE(warning.find("resampled"), std::string::npos);
+  EXPECT_EQ(ex.name, "rock");
+  EXPECT_EQ(ex.color.channels, 3);
+  EXPECT_EQ(ex.feature.width, 64);
+  EXPECT_EQ(ex.feature.height, 32);
+  EXPECT_EQ(ex.feature.channels, 1);
+  EXPECT_EQ(ex.displacement.pixels, ex.feature.pixels);  // defaults to the feature map
+  EXPECT_NEAR(ex.color.at(5, 3, 0), 1.f, 1e-5);
+  EXPECT_NEAR(ex.color.at(5, 4, 0), 0.5f, 0.003);
+  // Still a left-to-right ramp in [0,1] after resampling.
+  EXPECT_LT(ex.feature.at(0, 10, 0), 0.02f);
+  EXPECT_GT(ex.feature.at(63, 10, 0), 0.98f);
+  for (float f : ex.feature.pixels) {
+    EXPECT_GE(f, 0.f);
+    EXPECT_LE(f, 1.f);
+  }
+}
+
+TEST(Exemplar, GreyColourBecomesRgbAndDisplacementIsItsOwn) {
+  TempDir dir("exemplar");
+  write_png(dir / "g.png", Image(8, 8, 1, 0.25f), true);
+  write_png(dir / "f.png", Image(8, 8, 1, 0.5f), false, 16);
+  write_png(dir / "d.png", Image(16, 16, 1, 0.75f), false, 16);
+  testing::internal::CaptureStderr();
+  const Exemplar ex = load_exemplar(dir / "g.png", dir / "f.png", dir / "d.png");
+  testing::internal::GetCapturedStderr();
+  ASSERT_EQ(ex.color.channels, 3);
+  EXPECT_NEAR(ex.color.at(2, 2, 1), 0.25f, 0.003);
+  EXPECT_EQ(ex.displacement.width, 8);
+  EXPECT_NEAR(ex.displacement.at(3, 3, 0), 0.75f, 1e-4);
+}
+
+TEST(Exemplar, DifferentAspectIsAnInputErrorNamingBothFiles) {
+  TempDir dir("exemplar");
+  write_png(dir / "c.png", Image(64, 32, 3, 0.5f), true);
+  write_png(dir / "f.png", Image(32, 32, 1, 0.5f), false, 16);
+  try {
+    load_exemplar(dir / "c.png", dir / "f.png");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("f.png"), std::string::npos) << what;
+    EXPECT_NE(what.find("c.png"), std::string::npos) << what;
+    EXPECT_NE(what.find("32x32"), std::string::npos) << what;
+    EXPECT_NE(what.find("64x32"), std::string::npos) << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+  }
+}
+
+TEST(Exemplar, FeatureOutsideUnitRangeIsAnInputError) {
+  TempDir dir("exemplar");
+  write_png(dir / "c.png", Image(8, 8, 3, 0.5f), true);
+  Image feature(8, 8, 1, 0.5f);
+  feature.at(2, 5, 0) = 1.5f;
+  write_exr(dir / "f.exr", feature, {"Y"}, {ExrPixelType::Float});
+  try {
+    load_exemplar(dir / "c.png", dir / "f.exr");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), dir / "f.exr");
+    EXPECT_NE(std::string(e.what()).find("(2, 5)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Exemplar, UnreadableImagesAreInputErrorsNamingTheFile) {
+  TempDir dir("exemplar");
+  write_png(dir / "f.png", Image(8, 8, 1, 0.5f), false, 16);
+  test::write_bytes(dir / "broken.png", "\x89PNG\r\n\x1a\n this is not a png");
+  test::write_bytes(dir / "text.jpg", "hello");
+  for (const std::string bad : {dir / "broken.png", dir / "text.jpg", dir / "missing.png"}) {
+    try {
+      load_exemplar(bad, dir / "f.png");
+      FAIL() << "expected InputError for " << bad;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), bad);
+      EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(load_exemplar(dir / "f.png", dir / "broken.png"), InputError);
+}
+
+TEST(ImageIo, WritesAreAtomic) {
+  TempDir dir("atomic");
+  const Image img = pattern(16, 16, 3, 0.f, 1.f);
+  write_exr(dir / "a.exr", img, {"R", "G", "B"});
+  write_png(dir / "a.png", img, true);
+  EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "a.png"}));  // no temporary left
+  const std::string before = test::read_bytes(dir / "a.exr");
+
+  // A failing write (empty image) leaves the earlier file as it was.
+  EXPECT_THROW(write_exr(dir / "a.exr", Image(), {}), OutputError);
+  // A format OIIO cannot write fails before anything exists.
+  test::write_bytes(dir / "keep.nosuchformat", "precious");
+  EXPECT_THROW(write_exr(dir / "keep.nosuchformat", img, {"R", "G", "B"}), OutputError);
+  // The final rename fails: the target is a folder.
+  fs::create_directories(dir / "folder.exr");
+  EXPECT_THROW(write_exr(dir / "folder.exr", img, {"R", "G", "B"}), OutputError);
+
+  EXPECT_EQ(test::read_bytes(dir / "a.exr"), before);
+  EXPECT_EQ(test::read_bytes(dir / "keep.nosuchformat"), "precious");
+  EXPECT_TRUE(fs::is_directory(dir / "folder.exr"));
+  EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "a.png", "folder.exr", "keep.nosuchformat"}));
+}
+
+}  // namespace
+}  // namespace lapflow
