@@ -49,7 +49,7 @@ bool cgal_remesh(PatchMesh& mesh, double target_edge, int iterations) {
     // Border edges are constraints by default: split and collapsed along the
     // border, never moved off it, so the patch keeps its footprint.
     PMP::isotropic_remeshing(faces(sm), target_edge, sm,
-                             PMP::parameters::number_of_iterations(iterations).relax_constraints(true));
+                             PMP::parameters::number_of_iterations(iterations).relax_constraints(true).do_project(false));
   } catch (const std::exception&) {
     return false;
   }

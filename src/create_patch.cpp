@@ -200,17 +200,37 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   if (norm2(n_p) == 0) n_p = face_n;
   if (!(dot(face_n, n_p) > 0)) n_p = face_n;  // the rule keeps p's own triangle in every case
 
+  // Remeshing relaxes vertices tangentially without projecting them back
+  // (CGAL's projection builds an AABB tree per patch, half the cost of the
+  // remesh); this snap onto the fluid also finds the triangle under each
+  // vertex, which the fold test and the rasterizer need.
+  std::vector<int32_t> under;
+  auto snap = [&](PatchMesh& m) {
+    under.assign(m.positions.size(), -1);
+    for (std::size_t v = 0; v < m.positions.size(); ++v) {
+      const ClosestHit hit = surface.closest(m.positions[v], 0.25 * r);
+      if (!hit.found) continue;
+      under[v] = hit.triangle;
+      m.positions[v] = hit.point;
+    }
+  };
   PatchMesh mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, r);
   std::vector<Vec2> uv;
   bool flat = false;
   if (options.remesh) {
     PatchMesh remeshed = mesh;
-    if (detail::cgal_remesh(remeshed, options.remesh_edge * r) && detail::lscm_flatten(remeshed, uv)) {
-      mesh = std::move(remeshed);
-      flat = true;
+    if (detail::cgal_remesh(remeshed, options.remesh_edge * r)) {
+      snap(remeshed);
+      if (detail::lscm_flatten(remeshed, uv)) {
+        mesh = std::move(remeshed);
+        flat = true;
+      }
     }
   }
-  if (!flat && !detail::lscm_flatten(mesh, uv)) return std::nullopt;
+  if (!flat) {
+    snap(mesh);
+    if (!detail::lscm_flatten(mesh, uv)) return std::nullopt;
+  }
 
   // p's uv: barycentric in the patch triangle closest to p.
   int host = -1;
@@ -251,11 +271,7 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   }
   patch.positions = std::move(mesh.positions);
   patch.triangles = std::move(mesh.triangles);
-  patch.surface_triangle.resize(patch.positions.size());
-  for (std::size_t v = 0; v < patch.positions.size(); ++v) {
-    const ClosestHit hit = surface.closest(patch.positions[v], r);
-    patch.surface_triangle[v] = hit.found ? hit.triangle : -1;
-  }
+  patch.surface_triangle = std::move(under);
   patch_weights(fluid, r, weights, patch);
   return patch;
 }

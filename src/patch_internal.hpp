@@ -33,8 +33,9 @@ double lscm_energy(const PatchMesh& mesh, const std::vector<Vec2>& uv);
 /// and (1,0.5). For tests that the Eigen solver agrees with CGAL.
 bool cgal_lscm_flatten(const PatchMesh& mesh, int pin_a, int pin_b, std::vector<Vec2>& uv);
 
-/// CGAL isotropic remeshing with target edge length `target_edge` (metres),
-/// vertices projected back on the input; border edges are constrained (split
+/// CGAL isotropic remeshing with target edge length `target_edge` (metres);
+/// vertices are NOT projected back on the input (the caller snaps them onto
+/// the fluid with its own closest-point query); border edges are constrained (split
 /// and collapsed along the border only). Returns false (mesh untouched) when
 /// CGAL cannot take the mesh (not a valid manifold polygon mesh).
 bool cgal_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);

@@ -1,0 +1,166 @@
+// Benchmark of the patch stages (issue 3). Targets on the 2-core machine:
+// advect + project 1M patch vertices < 0.5 s; create + remesh + flatten a
+// ~200-triangle patch < 1 ms; seed a 100k-triangle frame with ~5k patches < 1 s.
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include "bench.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/parallel.hpp"
+#include "lapflow/patches.hpp"
+#include "lapflow/surface_query.hpp"
+#include "lapflow/velocity.hpp"
+
+namespace lapflow::bench {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Latitude-longitude sphere of 2 * n * n triangles (about 100k for n = 224),
+// turned by `angle` about a tilted axis so that two calls with different
+// angles give two meshings of the same sphere.
+TriMesh uv_sphere(int n, double angle) {
+  TriMesh m;
+  const Vec3 axis = normalized(Vec3{0.3, 0.2, 1});
+  auto turn = [&](const Vec3& v) {
+    const double c = std::cos(angle), s = std::sin(angle);
+    return v * c + cross(axis, v) * s + axis * (dot(axis, v) * (1 - c));
+  };
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const double th = M_PI * j / n, ph = 2 * M_PI * (i + 0.5 * (j % 2)) / n;
+      m.positions.push_back(turn({std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)}));
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * n + i, b = j * n + (i + 1) % n, c = (j + 1) * n + i, d = (j + 1) * n + (i + 1) % n;
+      m.triangles.push_back({a, c, d});
+      m.triangles.push_back({a, d, b});
+    }
+  return m;
+}
+
+std::size_t vertex_total(const PatchSet& s) {
+  std::size_t n = 0;
+  for (const Patch& p : s.patches) n += p.positions.size();
+  return n;
+}
+
+void bench_create(const SurfaceQuery& q, double r, bool remesh) {
+  PatchOptions po;
+  po.radius = r;
+  po.remesh = remesh;
+  const SurfaceAdjacency adj = build_surface_adjacency(q.mesh());
+  const auto points = seed_points(q.mesh(), 4 * r, 3);
+  const std::size_t n = std::min<std::size_t>(points.size(), 300);
+  std::size_t tris = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < n; ++i)
+    if (auto p = create_patch(q, adj, points[i], uint32_t(i), 0, po, {})) tris += p->triangles.size();
+  const double t = seconds_since(t0);
+  fmt::print("  create_patch{:<11} {:8.3f} ms per patch, {:.0f} triangles per patch (1 thread, {} patches)\n",
+             remesh ? " + remesh" : " (no remesh)", 1e3 * t / double(n), double(tris) / double(n), n);
+}
+
+void bench_sphere() {
+  const TriMesh a = uv_sphere(224, 0.0), b = uv_sphere(224, 0.37);
+  const SurfaceQuery qa(a), qb(b);
+  fmt::print("synthetic unit sphere, {} triangles, {} threads\n", a.triangles.size(), thread_count());
+  const double r = 0.042;  // ~5k patches on the unit sphere
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto pts = seed_points(a, r, 1);
+    fmt::print("  seed_points               {:8.3f} s, {} samples\n", seconds_since(t0), pts.size());
+  }
+  PatchSet set;
+  for (bool remesh : {false, true}) {
+    PatchOptions po;
+    po.radius = r;
+    po.remesh = remesh;
+    PatchSet s;
+    const auto t0 = std::chrono::steady_clock::now();
+    seed_patches(qa, 0, po, {}, {}, s);
+    fmt::print("  seed_patches{:<13} {:8.3f} s, {} patches, {} vertices\n", remesh ? " + remesh" : " (no remesh)",
+               seconds_since(t0), s.patches.size(), vertex_total(s));
+    if (remesh) set = std::move(s);
+  }
+  set_thread_count(1);
+  bench_create(qa, 0.1, true);
+  bench_create(qa, 0.1, false);
+  set_thread_count(0);
+  // Advect: rigid spin, frame b is the same sphere meshed differently.
+  // Duplicate the patch set until it holds about 1M vertices.
+  PatchSet big;
+  while (vertex_total(big) < 1000000)
+    for (const Patch& p : set.patches) {
+      big.patches.push_back(p);
+      if (vertex_total(big) >= 1000000) break;
+    }
+  const Vec3 omega{0, 0, 1.0};
+  const VelocityField spin = [omega](const Vec3& x) { return cross(omega, x); };
+  PatchOptions po;
+  po.radius = r;
+  AdvectOptions ao;
+  {
+    PatchSet s = big;
+    const std::size_t nv = vertex_total(s);
+    const auto t0 = std::chrono::steady_clock::now();
+    const AdvectStats st = advect_patches(qb, spin, spin, po, ao, {}, s);
+    fmt::print("  advect+project (analytic v) {:6.3f} s for {} vertices, {} removed\n", seconds_since(t0), nv,
+               st.vertices_removed);
+  }
+  {
+    TriMesh a2 = a, b2 = b;
+    a2.velocities.resize(a2.positions.size());
+    b2.velocities.resize(b2.positions.size());
+    for (std::size_t i = 0; i < a2.positions.size(); ++i) a2.velocities[i] = cross(omega, a2.positions[i]);
+    for (std::size_t i = 0; i < b2.positions.size(); ++i) b2.velocities[i] = cross(omega, b2.positions[i]);
+    const SurfaceQuery qa2(a2), qb2(b2);
+    PatchSet s = big;
+    const std::size_t nv = vertex_total(s);
+    const auto t0 = std::chrono::steady_clock::now();
+    const AdvectStats st = advect_patches(qb2, vertex_velocity_field(qa2), vertex_velocity_field(qb2), po, ao, {}, s);
+    fmt::print("  advect+project (vertex v)   {:6.3f} s for {} vertices, {} removed\n", seconds_since(t0), nv,
+               st.vertices_removed);
+  }
+}
+
+void bench_dam_break(const std::string& data_dir) {
+  const std::string f1 = data_dir + "/dam_break/dam_break.0001.ply", f2 = data_dir + "/dam_break/dam_break.0002.ply";
+  if (!std::filesystem::exists(f1) || !std::filesystem::exists(f2)) {
+    fmt::print("dam_break: not found under {}, skipped\n", data_dir);
+    return;
+  }
+  const TriMesh a = read_mesh(f1), b = read_mesh(f2);
+  const SurfaceQuery qa(a), qb(b);
+  fmt::print("dam_break frames 1-2, {} triangles\n", a.triangles.size());
+  for (double r : {0.08, 0.02}) {
+    PatchOptions po;
+    po.radius = r;
+    PatchSet s;
+    auto t0 = std::chrono::steady_clock::now();
+    seed_patches(qa, 1, po, {}, {}, s);
+    const double t_seed = seconds_since(t0);
+    const std::size_t nv = vertex_total(s);
+    t0 = std::chrono::steady_clock::now();
+    const AdvectStats st =
+        advect_patches(qb, vertex_velocity_field(qa), vertex_velocity_field(qb), po, {}, {}, s);
+    fmt::print("  r = {:.2f}: seed_patches {:.3f} s ({} patches, {} vertices); advect+project {:.3f} s ({} removed)\n",
+               r, t_seed, s.patches.size(), nv, seconds_since(t0), st.vertices_removed);
+  }
+}
+
+}  // namespace
+
+void bench_patches(const std::string& data_dir) {
+  bench_sphere();
+  bench_dam_break(data_dir);
+}
+
+}  // namespace lapflow::bench
