@@ -23,6 +23,7 @@ struct RasterContext {
   RasterMode mode;
   double delta_max;
   const TriangleLocator* locate = nullptr;
+  double radius = 0.1;  ///< r (metres)
   int N = 0;
   /// Texel-map index of every atlas pixel y * N + x, -1 outside charts.
   std::vector<int32_t> index;
@@ -33,6 +34,12 @@ struct RasterContext {
   std::vector<double> tri_radius;
   /// Vertex -> incident fluid triangles (CSR), for the seam fallback's walk.
   std::vector<int32_t> vt_offset, vt_list;
+  /// Fluid triangles with a vertex shared with another chart.
+  std::vector<uint8_t> near_seam;
+  /// Seam vertices (shared by two charts) bucketed on a grid of `seam_cell`
+  /// metres: sorted (cell hash, vertex) pairs.
+  double seam_cell = 0;
+  std::vector<std::pair<uint64_t, int32_t>> seam_grid;
 
   RasterContext(const TriMesh& m, const SurfaceAtlas& a, const ErosionMap& e, RasterMode mo, double dm)
       : mesh(m), atlas(a), erosion(e), mode(mo), delta_max(dm) {}

@@ -111,10 +111,18 @@ void draw_triangle(RasterContext& ctx, const Vec2 P[3], const Vec2 uv[3], const 
   }
 }
 
-// Pixel positions of patch triangle vertices through fluid triangle F.
+// Pixel positions of a patch triangle's vertices for texels of fluid
+// triangle F: a vertex on F's chart keeps its own position (the one in-chart
+// triangles use, so shared edges match and no texel falls in a crack); the
+// others go through F's affine map.
 bool pixels_through(const RasterContext& ctx, const Patch& patch, const Tri& t, int F, Vec2 P[3]) {
-  for (int k = 0; k < 3; ++k)
+  const int chart = ctx.atlas.chart_of_triangle[F];
+  for (int k = 0; k < 3; ++k) {
+    const int vt = vertex_triangle(ctx, patch, t[k]);
+    if (vt >= 0 && ctx.atlas.chart_of_triangle[vt] == chart && to_pixels(ctx, vt, patch.positions[t[k]], P[k]))
+      continue;
     if (!to_pixels(ctx, F, patch.positions[t[k]], P[k])) return false;
+  }
   return true;
 }
 
@@ -139,7 +147,7 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
 // vertices from its vertices' triangles, bounded by its bounding sphere plus a
 // margin), each drawn through its own affine map into its own texels.
 void draw_seam_triangle(RasterContext& ctx, const Patch& patch, int ti, const int vtri[3], uint64_t key,
-                        std::vector<int32_t>& found) {
+                        std::vector<int32_t>& found, int exclude_chart = -1) {
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
@@ -160,6 +168,7 @@ void draw_seam_triangle(RasterContext& ctx, const Patch& patch, int ti, const in
   const auto& tm = ctx.atlas.texels;
   for (const int32_t F : found) {
     if (dot(ctx.tri_normal[F], g.normal) <= 0) continue;  // the other side of a thin sheet
+    if (ctx.atlas.chart_of_triangle[F] == exclude_chart) continue;  // drawn in-chart already
     Vec2 P[3];
     if (!pixels_through(ctx, patch, t, F, P)) continue;
     const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(F) * 3];
@@ -191,6 +200,12 @@ bool skip_distorted(const RasterContext& ctx, const Patch& patch, int t) {
 }
 
 }  // namespace
+
+static uint64_t cell_hash(const RasterContext& ctx, const Vec3& p) {
+  const double h = ctx.seam_cell;
+  return hash64(uint64_t(int64_t(std::floor(p.x / h))), uint64_t(int64_t(std::floor(p.y / h))),
+                uint64_t(int64_t(std::floor(p.z / h))));
+}
 
 void setup_context(RasterContext& ctx) {
   const SurfaceAtlas& atlas = ctx.atlas;
@@ -230,6 +245,45 @@ void setup_context(RasterContext& ctx) {
   std::vector<int32_t> fill(ctx.vt_offset.begin(), ctx.vt_offset.end() - 1);
   for (std::size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) ctx.vt_list[fill[mesh.triangles[t][k]]++] = int32_t(t);
+
+  // Seams: vertices whose triangles lie in more than one chart.
+  std::vector<uint8_t> seam_vertex(mesh.positions.size(), 0);
+  double edge_sum = 0;
+  for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
+    const int32_t b = ctx.vt_offset[v], e = ctx.vt_offset[v + 1];
+    for (int32_t j = b + 1; j < e && !seam_vertex[v]; ++j)
+      seam_vertex[v] = atlas.chart_of_triangle[ctx.vt_list[j]] != atlas.chart_of_triangle[ctx.vt_list[b]];
+  }
+  ctx.near_seam.assign(nt, 0);
+  for (std::size_t t = 0; t < nt; ++t) {
+    const Tri& T = mesh.triangles[t];
+    ctx.near_seam[t] = seam_vertex[T[0]] | seam_vertex[T[1]] | seam_vertex[T[2]];
+    edge_sum += norm(mesh.positions[T[1]] - mesh.positions[T[0]]);
+  }
+  // Cells about a patch triangle's size (r / 6 by default) or a fluid edge.
+  ctx.seam_cell = std::max({nt > 0 ? edge_sum / double(nt) : 1.0, ctx.radius / 4, 1e-9});
+  ctx.seam_grid.clear();
+  for (std::size_t v = 0; v < mesh.positions.size(); ++v)
+    if (seam_vertex[v]) ctx.seam_grid.push_back({cell_hash(ctx, mesh.positions[v]), int32_t(v)});
+  std::sort(ctx.seam_grid.begin(), ctx.seam_grid.end());
+}
+
+static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double radius) {
+  if (ctx.seam_grid.empty()) return false;
+  const double h = ctx.seam_cell;
+  const int64_t x0 = int64_t(std::floor((c.x - radius) / h)), x1 = int64_t(std::floor((c.x + radius) / h));
+  const int64_t y0 = int64_t(std::floor((c.y - radius) / h)), y1 = int64_t(std::floor((c.y + radius) / h));
+  const int64_t z0 = int64_t(std::floor((c.z - radius) / h)), z1 = int64_t(std::floor((c.z + radius) / h));
+  if ((x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) > 4096) return true;  // huge triangle: assume it crosses
+  for (int64_t z = z0; z <= z1; ++z)
+    for (int64_t y = y0; y <= y1; ++y)
+      for (int64_t x = x0; x <= x1; ++x) {
+        const uint64_t key = hash64(uint64_t(x), uint64_t(y), uint64_t(z));
+        auto it = std::lower_bound(ctx.seam_grid.begin(), ctx.seam_grid.end(), std::make_pair(key, int32_t(-1)));
+        for (; it != ctx.seam_grid.end() && it->first == key; ++it)
+          if (norm2(ctx.mesh.positions[it->second] - c) <= radius * radius) return true;
+      }
+  return false;
 }
 
 namespace {
@@ -249,8 +303,10 @@ struct ChartTriangle {
 // buffer in cache), then one row-ordered sweep does the erosion test and the
 // atomic min. Row order keeps the index, key and texel arrays streaming
 // instead of hopping N texels at every triangle row.
+// Sets leaky[k] when triangle k covers a pixel centre outside its chart: its
+// vertices are in one chart but part of it lies across a seam or boundary.
 void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTriangle* tris, std::size_t count,
-                      std::vector<int32_t>& local) {
+                      std::vector<int32_t>& local, uint8_t* leaky) {
   int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
   for (std::size_t k = 0; k < count; ++k) {
     bx0 = std::min(bx0, tris[k].x0), by0 = std::min(by0, tris[k].y0);
@@ -272,6 +328,7 @@ void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTr
       const Vec2 P[3] = {t.bary.p0, t.bary.p0 + t.bary.e1, t.bary.p0 + t.bary.e2};
       draw_triangle(ctx, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
                     [&](int32_t idx) { return chart_of[tri_of[idx]] == chart; });
+      leaky[k] = 1;  // not checked on this rare path: let the seam fallback look
     }
     return;
   }
@@ -299,13 +356,15 @@ void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTr
       const int32_t k = lrow[x];
       if (k < 0) continue;
       const int32_t idx = irow[x];
-      if (idx < 0) continue;
+      if (idx < 0 || chart_of[tri_of[idx]] != chart) {
+        leaky[k] = 1;
+        continue;
+      }
       const ChartTriangle& t = tris[k];
       const uint64_t key = make_key(patch_index, std::size_t(t.index));
       std::atomic_ref<uint64_t> slot(ctx.keys[idx]);
       uint64_t cur = slot.load(std::memory_order_relaxed);
       if (cur <= key) continue;
-      if (chart_of[tri_of[idx]] != chart) continue;
       double l0, l1, l2;
       t.bary.at(x, y, l0, l1, l2);
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
@@ -333,6 +392,7 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
   }
   std::vector<int32_t> scratch;
   std::vector<ChartTriangle> in_chart;
+  std::vector<uint8_t> crossing;
   in_chart.reserve(patch.triangles.size());
   const int Nm1 = ctx.N - 1;
   for (std::size_t ti = 0; ti < patch.triangles.size(); ++ti) {
@@ -355,7 +415,22 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
       ct.x1 = std::min(Nm1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
       ct.y0 = std::max(0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
       ct.y1 = std::min(Nm1, int(std::floor(std::max({P[0].y, P[1].y, P[2].y}) + 1e-7)));
-      if (ct.x0 <= ct.x1 && ct.y0 <= ct.y1) in_chart.push_back(ct);
+      // Vertices in one chart do not keep the triangle's middle out of
+      // another one: near a seam, the parts beyond the chart go through the
+      // fallback too (pixel centres alone miss slivers under small triangles).
+      bool crosses = ctx.near_seam[vtri[t[0]]] || ctx.near_seam[vtri[t[1]]] || ctx.near_seam[vtri[t[2]]];
+      if (!crosses) {
+        const PatchTriGeometry g = patch_tri_geometry(patch, t);
+        crosses = seam_vertex_near(ctx, g.centre, g.radius + g.margin);
+      }
+      if (ct.x0 <= ct.x1 && ct.y0 <= ct.y1) {
+        in_chart.push_back(ct);
+        crossing.push_back(crosses);
+      } else if (crosses) {
+        const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
+        ++counters.seam_triangles;
+        draw_seam_triangle(ctx, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0);
+      }
     } else {
       ++counters.seam_triangles;
       const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
@@ -363,13 +438,28 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
     }
   }
   // Group by chart (stable: triangle order kept inside a chart).
-  std::stable_sort(in_chart.begin(), in_chart.end(),
-                   [](const ChartTriangle& a, const ChartTriangle& b) { return a.chart < b.chart; });
+  std::vector<uint32_t> order(in_chart.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = uint32_t(k);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return in_chart[a].chart < in_chart[b].chart; });
+  std::vector<ChartTriangle> sorted(in_chart.size());
+  std::vector<uint8_t> leaky(in_chart.size(), 0);
+  for (std::size_t k = 0; k < order.size(); ++k) sorted[k] = in_chart[order[k]], leaky[k] = crossing[order[k]];
+  in_chart.swap(sorted);
   for (std::size_t b = 0; b < in_chart.size();) {
     std::size_t e = b;
     while (e < in_chart.size() && in_chart[e].chart == in_chart[b].chart) ++e;
-    draw_chart_group(ctx, patch_index, &in_chart[b], e - b, scratch);
+    draw_chart_group(ctx, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
     b = e;
+  }
+  // The parts of leaky triangles beyond their chart, through the fallback.
+  for (std::size_t k = 0; k < in_chart.size(); ++k) {
+    if (!leaky[k]) continue;
+    ++counters.seam_triangles;
+    const Tri& t = patch.triangles[in_chart[k].index];
+    const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
+    draw_seam_triangle(ctx, patch, in_chart[k].index, vt, make_key(patch_index, std::size_t(in_chart[k].index)),
+                       scratch, in_chart[k].chart);
   }
 }
 
@@ -382,7 +472,8 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int tex
   bool ok = vt[0] >= 0 && vt[1] >= 0 && vt[2] >= 0;
   if (ok) {
     const int c0 = ctx.atlas.chart_of_triangle[vt[0]];
-    ok = ctx.atlas.chart_of_triangle[vt[1]] == c0 && ctx.atlas.chart_of_triangle[vt[2]] == c0;
+    ok = ctx.atlas.chart_of_triangle[vt[1]] == c0 && ctx.atlas.chart_of_triangle[vt[2]] == c0 &&
+         ctx.atlas.chart_of_triangle[texel_tri] == c0;
     for (int k = 0; ok && k < 3; ++k) ok = to_pixels(ctx, vt[k], patch.positions[t[k]], out[k]);
     if (ok) {
       if (same_chart) *same_chart = true;
@@ -406,6 +497,9 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   RasterStats& st = out.stats;
   RasterContext ctx(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
   ctx.locate = locate ? &locate : nullptr;
+  ctx.radius = options.radius;
+  if (options.mode == RasterMode::Blend)
+    throw std::invalid_argument("rasterize_atlas: RasterMode::Blend is not implemented yet");
   setup_context(ctx);
   const int N = ctx.N;
   const TexelMap& tm = atlas.texels;
@@ -478,7 +572,9 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
         const int ti = int(key & 0xffffffffu);
         const Patch& patch = patches.patches[p];
         // Same-chart winners do not depend on the texel's triangle: reuse.
-        if (key != last_key || (!last_same_chart && last_tri != tm.triangle[i])) {
+        const int tri = tm.triangle[i];
+        if (key != last_key || (last_same_chart ? atlas.chart_of_triangle[tri] != atlas.chart_of_triangle[last_tri]
+                                                : last_tri != tri)) {
           last_ok = winner_pixels(ctx, patch, ti, tm.triangle[i], P, &last_same_chart) && bary.init(P);
           last_key = key;
           last_tri = tm.triangle[i];
