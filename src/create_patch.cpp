@@ -168,6 +168,61 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
   return m;
 }
 
+// Step 2's distance rule applied again to a remeshed patch: the cut keeps
+// whole fluid triangles, so on a coarse fluid mesh it reaches r plus one
+// fluid edge; after remeshing at r/6 the part beyond r (outside the exemplar,
+// so eroded anyway) can go, which halves the vertex count on Mantaflow
+// meshes. Keeps the edge-connected piece holding the triangle nearest p.
+void trim_to_ball(PatchMesh& m, const Vec3& p, double r) {
+  const std::size_t nt = m.triangles.size();
+  std::vector<double> dist(nt);
+  int nearest = -1;
+  for (std::size_t t = 0; t < nt; ++t) {
+    const Tri& f = m.triangles[t];
+    double b1, b2;
+    dist[t] = norm(detail::closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]], b1, b2) - p);
+    if (nearest < 0 || dist[t] < dist[nearest]) nearest = int(t);
+  }
+  if (nearest < 0) return;
+  std::vector<std::pair<uint64_t, int>> edges;
+  edges.reserve(3 * nt);
+  for (std::size_t t = 0; t < nt; ++t)
+    if (dist[t] <= r || int(t) == nearest)
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t a = m.triangles[t][k], b = m.triangles[t][(k + 1) % 3];
+        edges.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), int(t)});
+      }
+  std::sort(edges.begin(), edges.end());
+  std::vector<std::vector<int>> next(nt);
+  for (std::size_t i = 1; i < edges.size(); ++i)
+    if (edges[i].first == edges[i - 1].first) {
+      next[edges[i].second].push_back(edges[i - 1].second);
+      next[edges[i - 1].second].push_back(edges[i].second);
+    }
+  std::vector<uint8_t> keep(nt, 0);
+  std::vector<int> stack{nearest};
+  keep[nearest] = 1;
+  while (!stack.empty()) {
+    const int t = stack.back();
+    stack.pop_back();
+    for (int u : next[t])
+      if (!keep[u]) keep[u] = 1, stack.push_back(u);
+  }
+  PatchMesh out;
+  std::vector<int32_t> remap(m.positions.size(), -1);
+  for (std::size_t t = 0; t < nt; ++t) {
+    if (!keep[t]) continue;
+    Tri g;
+    for (int k = 0; k < 3; ++k) {
+      int32_t& v = remap[m.triangles[t][k]];
+      if (v < 0) v = int32_t(out.positions.size()), out.positions.push_back(m.positions[m.triangles[t][k]]);
+      g[k] = v;
+    }
+    out.triangles.push_back(g);
+  }
+  m = std::move(out);
+}
+
 // Linear map of a 3D tangent direction into uv on one triangle.
 Vec2 uv_direction(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec2& u0, const Vec2& u1, const Vec2& u2,
                   const Vec3& dir) {
@@ -220,6 +275,7 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   if (options.remesh) {
     PatchMesh remeshed = mesh;
     if (detail::cgal_remesh(remeshed, options.remesh_edge * r)) {
+      trim_to_ball(remeshed, at.position, r);
       snap(remeshed);
       if (detail::lscm_flatten(remeshed, uv)) {
         mesh = std::move(remeshed);
