@@ -1,10 +1,159 @@
-// placeholder until the 'bake' command lands
+// `lapflow bake`: the product. Parses options (and a TOML scene file whose
+// keys mirror them), resolves defaults, and runs the frame loop.
+#include <filesystem>
+#include <map>
+
 #include "cli_common.hpp"
 #include "lapflow/errors.hpp"
+#include "lapflow/pipeline.hpp"
+
 namespace lapflow::cli {
-void add_bake_command(CLI::App& app) {
-  auto* cmd = app.add_subcommand("bake", "(not built yet)");
-  add_global_options(*cmd);
-  cmd->callback([] { throw lapflow::UsageError("'bake' is not built yet"); });
+namespace {
+
+struct BakeCli {
+  BakeOptions o;
+  std::string frames, orientation = "random", exr_type = "half", compression = "piz", mode = "erosion";
+  bool no_remesh = false;
+};
+
+void run_bake(BakeCli& c) {
+  apply_global_options();
+  BakeOptions& o = c.o;
+  o.seed = globals().seed;
+  if (!c.frames.empty()) o.frames = parse_frame_range(c.frames);
+  resolve_exemplar_paths(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
+  if (o.name.empty()) o.name = default_output_name(o.mesh_pattern);
+  o.patch.remesh = !c.no_remesh;
+  o.patch.align = parse_orientation(c.orientation, o.patch.align_direction);
+  o.exr.type = c.exr_type == "float" ? ExrPixelType::Float : ExrPixelType::Half;
+  static const std::map<std::string, ExrCompression> compressions{
+      {"piz", ExrCompression::Piz}, {"zip", ExrCompression::Zip}, {"dwaa", ExrCompression::Dwaa},
+      {"none", ExrCompression::None}};
+  o.exr.compression = compressions.at(c.compression);
+  static const std::map<std::string, RasterMode> modes{
+      {"erosion", RasterMode::Erosion}, {"blend", RasterMode::Blend}, {"advect", RasterMode::Advect}};
+  o.raster.mode = modes.at(c.mode);
+  resolve_bake_options(o);
+
+  const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
+  info("lapflow bake: {} frames {}-{} of {}", frames.size(), frames.front(), frames.back(), o.mesh_pattern);
+  info("  exemplar {} | radius {:.4g} m | atlas {}x{} | seed {} | {} threads", o.exemplar_color, o.patch.radius,
+       o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
+  Progress progress("bake", frames.size());
+  double seconds = 0;
+  bake(o, [&](const FrameStats& s) {
+    seconds += s.seconds_total;
+    progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
+                              s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
+                              100 * s.coverage, s.seconds_total));
+  });
+  progress.finish();
+  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", frames.size(), seconds,
+       seconds / double(frames.size()), peak_rss_mb(), o.out_dir);
 }
+
+}  // namespace
+
+void add_bake_options(CLI::App& cmd, BakeCli& c);
+
+void add_bake_command(CLI::App& app) {
+  static BakeCli c;
+  CLI::App* cmd = app.add_subcommand("bake", "Bake a liquid sequence into per-frame EXR atlases and UV meshes");
+  cmd->description(
+      "Bake a liquid sequence into per-frame EXR atlases and UV meshes.\n\n"
+      "Reads one mesh per frame (PLY or OBJ, with per-vertex velocity vx vy vz or an OpenVDB velocity grid),\n"
+      "covers the first frame with Poisson-disk texture patches, carries them along the flow frame by frame,\n"
+      "erodes each patch where it is too distorted (guided by the exemplar's feature map), fills holes with\n"
+      "new patches and writes, per frame N in --out:\n"
+      "  NAME.N.obj + NAME.N.mtl   the frame's mesh with atlas UVs (MTL points at the two EXRs)\n"
+      "  NAME.color.N.exr          R G B A (A = 1 inside charts), gutter dilated\n"
+      "  NAME.disp.N.exr           Y: displacement from the exemplar's height map\n"
+      "  NAME.aov.N.exr            patch_id u v w per texel (with --aov)\n"
+      "  NAME.patches.N.ply        the patches (with --dump-patches)\n"
+      "  NAME.stats.jsonl          one JSON line per frame: counts, coverage, seconds per stage, memory\n"
+      "Every file is written to a temporary name and renamed: an interrupted bake never leaves half files.\n\n"
+      "A scene file (lapflow bake scene.toml) holds the same options as keys (mesh = \"...\", radius = 0.05);\n"
+      "options given on the command line override it. Paths in it are relative to the file.\n\n"
+      "Exit codes: 0 ok, 2 bad input or usage (the message names the file, frame and element), 1 internal error.");
+  add_bake_options(*cmd, c);
+  add_global_options(*cmd);
+  cmd->callback([] { run_bake(c); });
+}
+
+void add_bake_options(CLI::App& cmd, BakeCli& c) {
+  BakeOptions& o = c.o;
+  o.patch.radius = 0;       // automatic unless given
+  o.atlas.resolution = 0;   // automatic unless given
+  cmd.add_option("--mesh", o.mesh_pattern,
+                 "Per-frame meshes: name.%04d.ply, name.####.ply, name.$F4.ply or name.$F.ply (PLY or OBJ)")
+      ->group("Input");
+  cmd.add_option("--frames", c.frames, "Frame range A-B (default: every frame found on disk)")->group("Input");
+  cmd.add_option("--velocity-vdb", o.velocity_vdb_pattern,
+                 "Per-frame OpenVDB velocity files (default: per-vertex vx vy vz of the meshes)")
+      ->group("Input");
+  cmd.add_option("--velocity-grid", o.velocity_grid, "Grid name in the VDB files (default: vel, v, velocity)")
+      ->group("Input");
+  cmd.add_option("--fps", o.fps, "Frames per second; dt = 1/fps")->capture_default_str()->group("Input");
+  cmd.add_option("--min-speed", o.min_speed, "Velocities slower than this (m/s) count as zero: stops creep at rest")
+      ->capture_default_str()
+      ->group("Input");
+  cmd.add_flag("--allow-zero-velocity", o.allow_zero_velocity, "Accept meshes without velocity (a still texture)")
+      ->group("Input");
+  cmd.add_option("--exemplar", o.exemplar_color,
+                 "Colour exemplar (PNG/JPEG/TIFF/EXR), or the name of a shipped exemplar (pebbles, lava, squares, "
+                 "scales, foam)")
+      ->group("Exemplar");
+  cmd.add_option("--feature", o.exemplar_feature,
+                 "Feature map in [0,1], same aspect (default: NAME.feature.* beside the exemplar)")
+      ->group("Exemplar");
+  cmd.add_option("--displacement", o.exemplar_displacement,
+                 "Displacement map (default: NAME.disp.* beside the exemplar, else the feature map)")
+      ->group("Exemplar");
+  cmd.add_option("--out", o.out_dir, "Output folder (created)")->group("Output");
+  cmd.add_option("--name", o.name, "Output file prefix (default: the mesh pattern's name)")->group("Output");
+  o.name.clear();
+  cmd.add_flag("--aov", o.aov, "Also write NAME.aov.N.exr: patch_id, u, v, w per texel")->group("Output");
+  cmd.add_flag("--dump-patches", o.dump_patches, "Also write the patches of every frame as NAME.patches.N.ply")
+      ->group("Output");
+  cmd.add_option("--exr-type", c.exr_type, "EXR pixel type of colour and displacement")
+      ->check(CLI::IsMember({"half", "float"}))
+      ->capture_default_str()
+      ->group("Output");
+  cmd.add_option("--compression", c.compression, "EXR compression")
+      ->check(CLI::IsMember({"piz", "zip", "dwaa", "none"}))
+      ->capture_default_str()
+      ->group("Output");
+  cmd.add_option("--radius", o.patch.radius,
+                 "Patch radius r in scene units: the exemplar spans 2r on the surface (0 = about 1500 patches)")
+      ->capture_default_str()
+      ->group("Patches");
+  cmd.add_option("--spacing", o.seeding.spacing, "Poisson-disk distance between seeds, in units of r")
+      ->capture_default_str()
+      ->group("Patches");
+  cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
+      ->group("Patches");
+  cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
+      ->capture_default_str()
+      ->group("Patches");
+  cmd.add_option("--orientation", c.orientation,
+                 "random (from seed and patch id) or world:x,y,z (u along that direction on the tangent plane)")
+      ->capture_default_str()
+      ->group("Patches");
+  cmd.add_option("--delta-max", o.weights.delta_max, "Distortion at which a patch is fully eroded (Sorkine delta)")
+      ->capture_default_str()
+      ->group("Erosion");
+  cmd.add_option("--epsilon", o.raster.epsilon, "Erosion offset epsilon of the paper")
+      ->capture_default_str()
+      ->group("Erosion");
+  cmd.add_option("--mode", c.mode,
+                 "erosion (the paper), blend (alpha-blend every covering patch: ghosts), advect (no erosion)")
+      ->check(CLI::IsMember({"erosion", "blend", "advect"}))
+      ->capture_default_str()
+      ->group("Erosion");
+  cmd.add_option("--resolution", o.atlas.resolution, "Atlas width = height in texels (0 = from the exemplar's density)")
+      ->capture_default_str()
+      ->group("Atlas");
+  cmd.add_option("--gutter", o.atlas.gutter, "Empty texels around every chart")->capture_default_str()->group("Atlas");
+}
+
 }  // namespace lapflow::cli

@@ -1,0 +1,73 @@
+#pragma once
+/// \file pipeline.hpp The bake: the whole frame loop over one per-frame state
+/// (ALGORITHM.md steps 1-10). The CLI and the scene file fill BakeOptions.
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/atlas.hpp"
+#include "lapflow/image.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/patches.hpp"
+#include "lapflow/raster.hpp"
+
+namespace lapflow {
+
+struct BakeOptions {
+  // Inputs
+  std::string mesh_pattern;               ///< per-frame PLY/OBJ pattern
+  std::optional<FrameRange> frames;       ///< all frames on disk when empty
+  std::string velocity_vdb_pattern;       ///< per-frame OpenVDB files; vertex velocities when empty
+  std::string velocity_grid;              ///< grid name; tries vel, v, velocity when empty
+  double fps = 24;                        ///< dt = 1/fps seconds
+  double min_speed = 0;                   ///< m/s: slower velocities count as zero
+  bool allow_zero_velocity = false;       ///< accept a sequence with no velocity
+  std::string exemplar_color, exemplar_feature, exemplar_displacement;
+  // Outputs
+  std::string out_dir;
+  std::string name = "lapflow";
+  bool aov = false;
+  bool dump_patches = false;
+  ExrOptions exr;
+  // Stages
+  uint64_t seed = 1;
+  PatchOptions patch;                     ///< patch.radius = r in metres (0 = automatic)
+  SeedOptions seeding;
+  AdvectOptions advect;                   ///< advect.dt is set from fps
+  WeightOptions weights;
+  AtlasOptions atlas;                     ///< atlas.resolution 0 = automatic
+  RasterOptions raster;
+};
+
+/// Statistics of one baked frame (one line of NAME.stats.jsonl).
+struct FrameStats {
+  int frame = 0;
+  std::size_t triangles = 0, vertices = 0;
+  std::size_t patches_alive = 0, patches_born = 0, patches_retired = 0, patches_lost = 0;
+  std::size_t patch_vertices_removed = 0;
+  int charts = 0;
+  double utilization = 0;
+  std::size_t chart_texels = 0;
+  double coverage = 0;                    ///< covered chart texels / chart texels
+  double seconds_read = 0, seconds_advect = 0, seconds_seed = 0, seconds_atlas = 0, seconds_raster = 0,
+         seconds_write = 0, seconds_total = 0;
+  double peak_rss_mb = 0;
+  std::string velocity_source;
+};
+
+/// Fills automatic values (radius, resolution) from the first frame and the
+/// exemplar, and checks every option. Throws UsageError / InputError.
+void resolve_bake_options(BakeOptions& options);
+
+/// Bakes every frame; `on_frame` is called after each frame is written.
+/// Files per frame N (4 digits) in out_dir: NAME.N.obj + NAME.N.mtl,
+/// NAME.color.N.exr, NAME.disp.N.exr, NAME.aov.N.exr (with aov),
+/// NAME.patches.N.ply (with dump_patches); NAME.stats.jsonl for the sequence.
+void bake(const BakeOptions& options, const std::function<void(const FrameStats&)>& on_frame = {});
+
+/// Peak resident memory of this process so far, in MiB.
+double peak_rss_mb();
+
+}  // namespace lapflow
