@@ -51,7 +51,10 @@ struct SurfacePoint {
 
 struct PatchOptions {
   double radius = 0.1;            ///< r in metres: the exemplar spans 2r on the surface
-  bool remesh = true;             ///< isotropic remeshing of each new patch before flattening
+  /// Isotropic remeshing of each new patch before flattening (CGAL), then
+  /// trimmed to distance r of p. On by default: on dam_break it doubles the
+  /// mean weight at equal distortion (docs/patches.md).
+  bool remesh = true;
   double remesh_edge = 1.0 / 6;   ///< target edge length as a fraction of r
   /// Orientation: random angle from hash(seed, patch id) unless `align` is
   /// set, in which case u follows `align_direction` projected on the tangent plane.
@@ -75,9 +78,10 @@ struct WeightOptions {
   double center_radius = 0.125;  ///< rest-uv distance from (0.5,0.5) where B_V = 1 on the boundary
 };
 
-/// Poisson-disk samples on the surface, minimum Euclidean distance
-/// `spacing * radius`, deterministic for a seed at any thread count; every
-/// connected component large enough to hold a sample gets one.
+/// Poisson-disk samples on the surface: minimum EUCLIDEAN distance
+/// `min_distance` (metres) between samples of the same connected component
+/// (patches never cross components); every component with non-zero area gets
+/// at least one; deterministic for a seed at any thread count.
 std::vector<SurfacePoint> seed_points(const TriMesh& mesh, double min_distance, uint64_t seed);
 
 /// Vertex -> triangle adjacency of one frame's mesh (CSR), which patch
@@ -112,8 +116,10 @@ struct AdvectStats {
 
 /// ALGORITHM.md step 4: moves every patch vertex and centre with the velocity
 /// from frame f-1 (field `v_prev`, surface at time t) to frame f (`v_next`,
-/// t + dt) by midpoint RK2, sub-stepped, then projects onto `next`; removes
-/// what moved too far, isolated vertices and patches left with no triangle.
+/// t + dt) by Heun's RK2 (velocity linear in time in between), sub-stepped,
+/// then projects onto `next`; removes what moved too far, isolated vertices
+/// and patches left with no triangle (order of the others kept). Updates
+/// surface_triangle and the weights. Same result for any thread count.
 AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev, const VelocityField& v_next,
                            const PatchOptions& patch_options, const AdvectOptions& options,
                            const WeightOptions& weights, PatchSet& patches);
