@@ -274,7 +274,15 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   bool flat = false;
   if (options.remesh) {
     PatchMesh remeshed = mesh;
-    if (detail::cgal_remesh(remeshed, options.remesh_edge * r)) {
+    // When the fluid triangles are much larger than r the cut is far larger
+    // than the patch; cap the remeshed size (before trimming) so one patch
+    // never costs more than a few thousand triangles.
+    double area = 0;
+    for (const Tri& f : mesh.triangles)
+      area += 0.5 * norm(cross(mesh.positions[f[1]] - mesh.positions[f[0]], mesh.positions[f[2]] - mesh.positions[f[0]]));
+    constexpr double kMaxRemeshTriangles = 4000;
+    const double edge = std::max(options.remesh_edge * r, std::sqrt(area / (0.433 * kMaxRemeshTriangles)));
+    if (detail::cgal_remesh(remeshed, edge)) {
       trim_to_ball(remeshed, at.position, r);
       snap(remeshed);
       if (detail::lscm_flatten(remeshed, uv)) {

@@ -199,3 +199,16 @@ TEST(PatchesCreate, DropsTrianglesFacingAwayAndOrientationFollowsTheSeed) {
   EXPECT_NEAR(x1.x - 0.5, 0.1 * 2 * o.radius, 1e-9);
   EXPECT_NEAR(x1.y - 0.5, 0.0, 1e-9);
 }
+
+TEST(PatchesCreate, RemeshingCostStaysBoundedWhenFluidTrianglesDwarfThePatch) {
+  // Two triangles 100 r across: remeshing them at r/6 would make ~10^6 triangles.
+  const TriMesh big = test::plane_grid(1, 1, 10.0, 10.0);
+  SurfaceQuery q(big);
+  PatchOptions o;
+  o.radius = 0.1;
+  const auto p = create_patch(q, {{5.2, 4.1, 0}, {0, 0, 1}, -1}, 0, 0, o, {});
+  ASSERT_TRUE(p);
+  EXPECT_LT(p->triangles.size(), 4000u);
+  EXPECT_LT(norm(point_at_uv(*p, {0.5, 0.5}) - Vec3{5.2, 4.1, 0}), 1e-9);
+  for (float d : p->triangle_delta) EXPECT_NEAR(d, 1.0, 1e-3);
+}
