@@ -80,8 +80,8 @@ bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMo
   return detail::keeps(map, u, v, w, mode);
 }
 
-void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4]) {
-  detail::sample(mips, u, v, lod, out);
+void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4], bool trilinear) {
+  detail::sample(mips, u, v, lod, out, trilinear);
 }
 
 }  // namespace lapflow

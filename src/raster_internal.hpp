@@ -32,6 +32,8 @@ struct RasterContext {
   /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).
   std::vector<Vec3> tri_normal, tri_centroid;
   std::vector<double> tri_radius;
+  /// Twice each fluid triangle's area in atlas pixels.
+  std::vector<double> tri_area2_px;
   /// Vertex -> incident fluid triangles (CSR), for the seam fallback's walk.
   std::vector<int32_t> vt_offset, vt_list;
   /// Fluid triangles with a vertex shared with another chart.

@@ -39,10 +39,14 @@ inline bool keeps(const ErosionMap& map, double u, double v, double w, RasterMod
   return std::sqrt(double(f) + D) * map.inv_max - map.epsilon >= 1.0 - w;
 }
 
-inline void sample(const ExemplarMips& mips, double u, double v, double lod, float out[4]) {
+inline void sample(const ExemplarMips& mips, double u, double v, double lod, float out[4], bool trilinear = true) {
   const int last = int(mips.levels.size()) - 1;
   if (lod <= 0 || last == 0) {
     bilinear<4>(mips.levels[0], u, v, out);
+    return;
+  }
+  if (!trilinear) {  // nearest level: half the cost, a step when lod crosses .5 between frames
+    bilinear<4>(mips.levels[std::min(int(lod + 0.5), last)], u, v, out);
     return;
   }
   const int l0 = std::min(int(lod), last);

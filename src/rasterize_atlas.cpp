@@ -226,6 +226,7 @@ void setup_context(RasterContext& ctx) {
   ctx.tri_normal.resize(nt);
   ctx.tri_centroid.resize(nt);
   ctx.tri_radius.resize(nt);
+  ctx.tri_area2_px.resize(nt);
   parallel_for(nt, [&](std::size_t b, std::size_t e) {
     for (std::size_t t = b; t < e; ++t) {
       const Tri& T = mesh.triangles[t];
@@ -234,6 +235,8 @@ void setup_context(RasterContext& ctx) {
       const Vec3 m = (a + bb + c) / 3.0;
       ctx.tri_centroid[t] = m;
       ctx.tri_radius[t] = std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}));
+      const Vec2* cu = &atlas.corner_uv[t * 3];
+      ctx.tri_area2_px[t] = std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(ctx.N) * ctx.N;
     }
   }, 4096);
   // Vertex -> triangles in triangle order (deterministic walk order).
@@ -296,6 +299,7 @@ struct ChartTriangle {
   Vec2 uv[3];
   float w[3];
   int x0, y0, x1, y1;  // pixel bbox, clamped to the atlas
+  bool ring = false;   // test the pixels around it for a seam (see rasterize_patch)
 };
 
 // The in-chart triangles of one patch and chart: first each pixel of their
@@ -333,21 +337,38 @@ void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTr
     return;
   }
   local.assign(W * H, -1);
-  for (std::size_t k = 0; k < count; ++k) {
-    const ChartTriangle& t = tris[k];
-    for (int y = t.y0; y <= t.y1; ++y) {
-      int32_t* row = &local[std::size_t(y - by0) * W - bx0];
-      for (int x = t.x0; x <= t.x1; ++x) {
-        if (row[x] >= 0) continue;
-        double l0, l1, l2;
-        t.bary.at(x, y, l0, l1, l2);
-        if (l0 >= -kInsideTol && l1 >= -kInsideTol && l2 >= -kInsideTol) row[x] = int32_t(k);
-      }
-    }
-  }
   const int chart = tris[0].chart;
   const auto& tri_of = ctx.atlas.texels.triangle;
   const auto& chart_of = ctx.atlas.chart_of_triangle;
+  const int Nm1 = ctx.N - 1;
+  for (std::size_t k = 0; k < count; ++k) {
+    const ChartTriangle& t = tris[k];
+    // Barycentric slack of one pixel per edge: pixel centres within 1 px
+    // outside the triangle only serve the leak test (a seam cutting a sliver
+    // off the triangle between pixel centres still shows up there).
+    const Vec2 e[3] = {t.bary.e2 - t.bary.e1, t.bary.e2, t.bary.e1};  // edges opposite vertices 0, 1, 2
+    const double area2 = 1.0 / std::abs(t.bary.inv_area);
+    double ring[3];
+    for (int i = 0; i < 3; ++i) ring[i] = -norm(e[i]) / area2;
+    bool leak = leaky[k] || !t.ring;  // no ring test: nothing to look for
+    const int ry0 = std::max(0, t.y0 - 1), ry1 = std::min(Nm1, t.y1 + 1);
+    const int rx0 = std::max(0, t.x0 - 1), rx1 = std::min(Nm1, t.x1 + 1);
+    for (int y = ry0; y <= ry1; ++y) {
+      const bool in_rows = y >= t.y0 && y <= t.y1;
+      int32_t* row = &local[std::size_t(y - by0) * W - bx0];
+      for (int x = rx0; x <= rx1; ++x) {
+        double l0, l1, l2;
+        t.bary.at(x, y, l0, l1, l2);
+        if (in_rows && x >= t.x0 && x <= t.x1 && l0 >= -kInsideTol && l1 >= -kInsideTol && l2 >= -kInsideTol) {
+          if (row[x] < 0) row[x] = int32_t(k);
+        } else if (!leak && l0 >= ring[0] && l1 >= ring[1] && l2 >= ring[2]) {
+          const int32_t idx = ctx.index[std::size_t(y) * ctx.N + x];
+          leak = idx < 0 || chart_of[tri_of[idx]] != chart;
+        }
+      }
+    }
+    leaky[k] = leak && t.ring ? 1 : leaky[k];
+  }
   const std::size_t N = std::size_t(ctx.N);
   for (int y = by0; y <= by1; ++y) {
     const int32_t* lrow = &local[std::size_t(y - by0) * W - bx0];
@@ -418,8 +439,18 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
       // Vertices in one chart do not keep the triangle's middle out of
       // another one: near a seam, the parts beyond the chart go through the
       // fallback too (pixel centres alone miss slivers under small triangles).
-      bool crosses = ctx.near_seam[vtri[t[0]]] || ctx.near_seam[vtri[t[1]]] || ctx.near_seam[vtri[t[2]]];
-      if (!crosses) {
+      // Only for triangles of a few pixels: larger ones are tested on the
+      // pixels in and around them (draw_chart_group), much cheaper.
+      const double area2 = std::abs(cross(P[1] - P[0], P[2] - P[0]));
+      const bool tiny = area2 < 32;
+      const bool near = ctx.near_seam[vtri[t[0]]] || ctx.near_seam[vtri[t[1]]] || ctx.near_seam[vtri[t[2]]];
+      // The pixel ring test is needed where a seam may pass: next to one, or
+      // when the triangle is large against its vertices' fluid triangles (a
+      // seam could then cross it away from them).
+      ct.ring = near || area2 > 4 * std::min({ctx.tri_area2_px[vtri[t[0]]], ctx.tri_area2_px[vtri[t[1]]],
+                                              ctx.tri_area2_px[vtri[t[2]]]});
+      bool crosses = tiny && near;
+      if (tiny && !crosses) {
         const PatchTriGeometry g = patch_tri_geometry(patch, t);
         crosses = seam_vertex_near(ctx, g.centre, g.radius + g.margin);
       }
@@ -561,6 +592,8 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     bool last_ok = false, last_same_chart = false;
     Bary bary;
     Vec2 P[3];
+    std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run
+    uint64_t run = 0;
     for (std::size_t i = b; i < e; ++i) {
       const uint32_t pix = tm.texel[i];
       const int x = int(pix % uint32_t(N)), y = int(pix / uint32_t(N));
@@ -587,10 +620,14 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
-          sample(exemplar.mips, u, v, st.lod, s);
+          sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }
-        won[p].fetch_add(1, std::memory_order_relaxed);
+        if (p != run_patch) {
+          if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
+          run_patch = p, run = 0;
+        }
+        ++run;
       }
       float* c = &out.color.pixels[std::size_t(pix) * 4];
       c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
@@ -598,6 +635,7 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
       if (options.aov)
         for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
     }
+    if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
   }, 1 << 12);
   st.covered_texels = 0;
   for (uint64_t k : ctx.keys) st.covered_texels += k != kNoKey;

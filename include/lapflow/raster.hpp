@@ -34,7 +34,8 @@ struct RasterOptions {
   RasterMode mode = RasterMode::Erosion;
   bool fill_holes = true;     ///< step 8
   bool retire = true;         ///< step 9 (Erosion and Blend only; never in Advect mode)
-  bool mipmap = true;         ///< trilinear exemplar lookups at the atlas texel footprint (antialiasing)
+  bool mipmap = true;         ///< exemplar lookups at the mip level of the atlas texel footprint (antialiasing)
+  bool trilinear = true;      ///< blend the two nearest mip levels (false: nearest level, ~half the lookup cost)
   bool aov = true;            ///< fill FrameTextures::aov
   bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
   int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
@@ -79,7 +80,7 @@ bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMo
 /// Colour and displacement (R, G, B, H) at patch coordinates (u, v), clamped
 /// at the borders, trilinear at level of detail `lod` (log2 of the footprint
 /// in level-0 pixels; <= 0 is plain bilinear on level 0).
-void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4]);
+void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, float out[4], bool trilinear = true);
 
 struct RasterStats {
   std::size_t chart_texels = 0;
