@@ -238,6 +238,35 @@ openvdb::FloatGrid::Ptr build_level_set(DemoCase scene, double tau, double h) {
       out.setValueOn(q, v);
     }
   openvdb::tools::signedFloodFill(grid->tree());
+
+  // Where a crossing hid from the coarse levels (a sheet or tail squeezed
+  // harder than the margins allow), the flood fill guesses signs, and a sign
+  // change between two guessed voxels is skipped by volumeToMesh: a hole.
+  // Trace every guessed voxel that sits on a sign change and fill again,
+  // until every crossing lies between traced values: the mesh is closed.
+  for (int pass = 0; pass < 64; ++pass) {
+    std::vector<Key> missing;
+    for (auto leaf = grid->tree().cbeginLeaf(); leaf; ++leaf)
+      for (auto it = leaf->cbeginValueAll(); it; ++it) {
+        const openvdb::Coord q = it.getCoord();
+        const bool on = it.isValueOn(), inside = *it < 0;
+        for (int axis = 0; axis < 3; ++axis) {
+          openvdb::Coord nb = q;
+          nb[axis] += 1;
+          const bool nb_on = out.isValueOn(nb);
+          if ((on && nb_on) || (out.getValue(nb) < 0) == inside) continue;
+          if (!on && q.x() >= 0 && q.y() >= 0 && q.z() >= 0 && q.x() <= n && q.y() <= n && q.z() <= n)
+            missing.push_back({q.x(), q.y(), q.z()});
+          if (!nb_on && nb.x() <= n && nb.y() <= n && nb.z() <= n) missing.push_back({nb.x(), nb.y(), nb.z()});
+        }
+      }
+    if (missing.empty()) break;
+    evaluate(missing);
+    for (const Key& q : missing)
+      out.setValueOn(openvdb::Coord(q.i, q.j, q.k),
+                     std::clamp(corner(q.i, q.j, q.k), float(-background), float(background)));
+    openvdb::tools::signedFloodFill(grid->tree());
+  }
   return grid;
 }
 
