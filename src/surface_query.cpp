@@ -6,6 +6,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -146,6 +147,21 @@ ClosestHit SurfaceQuery::closest(const Vec3& p, double max_distance) const {
   rtcInitPointQueryContext(&context);
   rtcPointQuery(impl_->scene, &query, &context, point_query_callback, &state);
   if (state.best.found && state.best.distance > max_distance) state.best = {};
+  // A point already on the surface projects to itself, bit for bit: without
+  // this, re-projecting still patches every frame would drift by rounding and
+  // a still scene would not bake to identical atlases.
+  if (state.best.found) {
+    const Tri& f = mesh_.triangles[state.best.triangle];
+    double scale = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& v = mesh_.positions[f[k]];
+      scale = std::max({scale, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+    }
+    if (state.best.distance <= 16 * std::numeric_limits<double>::epsilon() * scale) {
+      state.best.point = p;
+      state.best.distance = 0;
+    }
+  }
   return state.best;
 }
 
