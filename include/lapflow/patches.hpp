@@ -69,7 +69,13 @@ struct SeedOptions {
 
 struct AdvectOptions {
   double dt = 1.0 / 24;            ///< seconds between frames
-  double max_step_fraction = 0.25; ///< sub-step so that |v| * h <= fraction * r
+  /// Sub-steps so that |v| * h <= fraction * r: a step never jumps farther
+  /// than one patch radius between two velocity samples.
+  double max_step_fraction = 1.0;
+  /// Sub-steps so that the velocity turns by at most this angle (radians)
+  /// per step: RK2's error grows with the cube of the turn (vortices), not
+  /// with the speed (a fast translation is integrated exactly in one step).
+  double max_turn = 0.05;
   double max_projection = 0.25;    ///< remove vertices moved farther than this * r by projection
 };
 
