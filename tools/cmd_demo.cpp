@@ -1,6 +1,7 @@
 // `lapflow demo`: writes the built-in demo scene as a PLY sequence with
 // velocities, so a first run needs no data. Generation lives in the library
 // (write_demo_sequence) so that a bake of the demo reuses it.
+#include <cmath>
 #include <filesystem>
 
 #include "cli_common.hpp"
@@ -14,8 +15,9 @@ struct DemoCommandOptions {
   std::string out;
   std::string name = "demo";
   std::string scene = "vortex";
-  int frames = 49;
+  int frames = 0;  ///< 0 = one period: round(T * fps) + 1
   double resolution = 128;
+  double triangles = 0;
   double fps = 24;
   double period = 2;
 };
@@ -28,10 +30,10 @@ DemoOptions to_demo_options(const DemoCommandOptions& o) {
     d.scene = DemoCase::Slab;
   else
     throw UsageError("--case must be 'vortex' or 'slab', not '" + o.scene + "'");
-  d.frames = o.frames;
+  d.frames = o.frames > 0 ? o.frames : int(std::lround(o.period * o.fps)) + 1;
   d.fps = o.fps;
   d.period = o.period;
-  d.voxel_size = 1.0 / o.resolution;
+  d.voxel_size = o.triangles > 0 ? demo_voxel_size_for(d.scene, o.triangles) : 1.0 / o.resolution;
   return d;
 }
 
@@ -40,7 +42,8 @@ void run_demo(const DemoCommandOptions& o) {
   const DemoOptions d = to_demo_options(o);
   info("demo '{}': {} frames at {} fps (t = 0 .. {:.3f} s, period T = {} s), voxel {:.4g} m ({} across 1 m), "
        "threads {}",
-       o.scene, d.frames, d.fps, (d.frames - 1) / d.fps, d.period, d.voxel_size, o.resolution, thread_count_label());
+       o.scene, d.frames, d.fps, (d.frames - 1) / d.fps, d.period, d.voxel_size, std::lround(1.0 / d.voxel_size),
+       thread_count_label());
   Progress progress("demo", std::size_t(d.frames));
   const DemoSequenceStats s = write_demo_sequence(d, o.out, o.name, [&](int f, const TriMesh& m) {
     progress.step(fmt::format("frame {}: {} triangles", f, m.triangle_count()));
@@ -73,14 +76,19 @@ void add_demo_command(CLI::App& app) {
       "The surface at time t is exact up to the voxel: a point is liquid when the flow, traced back to t = 0\n"
       "(RK4), lands inside the start shape. Frame f is at t = (f - 1) / fps.");
   cmd->add_option("--out", o.out, "Output folder (created when missing)")->required();
-  cmd->add_option("--frames", o.frames, "Number of frames; the default ends at t = T (the start shape again)")
-      ->check(CLI::Range(1, 100000))
-      ->capture_default_str();
+  cmd->add_option("--frames", o.frames,
+                  "Number of frames. Default: one period, round(T * fps) + 1 (49), so the last frame is at t = T, "
+                  "the start shape again")
+      ->check(CLI::Range(1, 100000));
   cmd->add_option("--resolution", o.resolution,
-                  "Level-set voxels across the 1 m box. 128 gives 14k-33k triangles per vortex frame; "
-                  "triangles grow with its square (300 passes 100k)")
+                  "Level-set voxels across the 1 m box. 128 gives 14k-33k triangles per vortex frame (6k-12k "
+                  "slab); triangles grow with its square: 350 passes 100k on every vortex frame")
       ->check(CLI::Range(8.0, 2048.0))
       ->capture_default_str();
+  cmd->add_option("--triangles", o.triangles,
+                  "Pick the resolution for about N triangles at frame 1 instead (mid-period vortex frames "
+                  "have up to 2.4x more)")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--case", o.scene, "Scene: vortex or slab")
       ->check(CLI::IsMember({"vortex", "slab"}))
       ->capture_default_str();
@@ -105,7 +113,7 @@ void add_demo_command(CLI::App& app) {
       "EXAMPLES\n"
       "  lapflow demo --out demo_seq\n"
       "  lapflow inspect demo_seq/demo.%04d.ply\n"
-      "  lapflow demo --out bench --resolution 320 --frames 10     # >100k triangles per frame\n"
+      "  lapflow demo --out bench --triangles 100000 --frames 10   # benchmark size\n"
       "  lapflow demo --out slab --case slab --name slab");
   cmd->callback([] { run_demo(o); });
 }
