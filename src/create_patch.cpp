@@ -263,8 +263,13 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   auto snap = [&](PatchMesh& m) {
     under.assign(m.positions.size(), -1);
     for (std::size_t v = 0; v < m.positions.size(); ++v) {
-      const ClosestHit hit = surface.closest(m.positions[v], 0.25 * r);
+      ClosestHit hit = surface.closest(m.positions[v], 0.25 * r);
       if (!hit.found) continue;
+      // Project once more from the snapped point: that is what advection does
+      // next frame, and on a shared edge it may pick the other triangle; doing
+      // it now makes a still scene bake identical atlases from frame 1 on.
+      const ClosestHit again = surface.closest(hit.point, 0.25 * r);
+      if (again.found) hit = again;
       under[v] = hit.triangle;
       m.positions[v] = hit.point;
     }

@@ -1,0 +1,207 @@
+// End-to-end properties of the bake (ALGORITHM.md "Properties the result must
+// have"): coverage, stillness, determinism across thread counts, rigid motion,
+// bad input that never damages earlier frames.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include "lapflow/demo_scene.hpp"
+#include "lapflow/errors.hpp"
+#include "lapflow/image.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/parallel.hpp"
+#include "lapflow/pipeline.hpp"
+#include "test_helpers.hpp"
+
+using namespace lapflow;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + name);
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+BakeOptions small_bake(const fs::path& meshes, const fs::path& out) {
+  BakeOptions o;
+  const std::string ex = std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/pebbles";
+  o.exemplar_color = ex + ".color.png";
+  o.exemplar_feature = ex + ".feature.png";
+  o.exemplar_displacement = ex + ".disp.png";
+  o.mesh_pattern = (meshes / "m.%04d.ply").string();
+  o.out_dir = out.string();
+  o.name = "t";
+  o.atlas.resolution = 256;
+  o.aov = true;
+  return o;
+}
+
+/// The demo's vortex, coarse, frames 1..n.
+fs::path demo_sequence(const std::string& name, int n) {
+  const fs::path d = fresh_dir(name);
+  DemoOptions demo;
+  demo.voxel_size = 1.0 / 40;
+  for (int f = 1; f <= n; ++f) write_ply((d / fmt::format("m.{:04d}.ply", f)).string(), demo_frame(demo, f));
+  return d;
+}
+
+Image frame_image(const fs::path& out, const std::string& kind, int frame) {
+  return read_image((out / fmt::format("t.{}.{:04d}.exr", kind, frame)).string(), ColorSpace::Linear);
+}
+
+std::vector<FrameStats> run(const BakeOptions& o) {
+  BakeOptions copy = o;
+  resolve_bake_options(copy);
+  std::vector<FrameStats> stats;
+  bake(copy, [&](const FrameStats& s) { stats.push_back(s); });
+  return stats;
+}
+
+}  // namespace
+
+TEST(Bake, EveryChartTexelIsCoveredOnEveryFrame) {
+  const fs::path meshes = demo_sequence("coverage_in", 4), out = fresh_dir("coverage_out");
+  const auto stats = run(small_bake(meshes, out));
+  ASSERT_EQ(stats.size(), 4u);
+  for (const FrameStats& s : stats) {
+    EXPECT_GT(s.chart_texels, 1000u);
+    EXPECT_EQ(s.coverage, 1.0) << "frame " << s.frame;
+    // Alpha marks chart texels; the AOV names a patch on each of them and none elsewhere.
+    const Image color = frame_image(out, "color", s.frame), aov = frame_image(out, "aov", s.frame);
+    std::size_t alpha = 0;
+    for (int y = 0; y < color.height; ++y)
+      for (int x = 0; x < color.width; ++x) {
+        const bool inside = color.at(x, y, 3) == 1.f;
+        alpha += inside;
+        if (inside) EXPECT_GE(aov.at(x, y, 0), 0.f);
+      }
+    EXPECT_EQ(alpha, s.chart_texels);
+  }
+}
+
+TEST(Bake, IdenticalForOneAndTwoThreads) {
+  const fs::path meshes = demo_sequence("threads_in", 3);
+  const fs::path out1 = fresh_dir("threads_1"), out2 = fresh_dir("threads_2");
+  set_thread_count(1);
+  const auto s1 = run(small_bake(meshes, out1));
+  set_thread_count(2);
+  const auto s2 = run(small_bake(meshes, out2));
+  set_thread_count(0);
+  ASSERT_EQ(s1.size(), s2.size());
+  for (std::size_t i = 0; i < s1.size(); ++i) {
+    EXPECT_EQ(s1[i].patches_alive, s2[i].patches_alive);
+    EXPECT_EQ(s1[i].patches_born, s2[i].patches_born);
+    for (const char* kind : {"color", "disp", "aov"}) {
+      const Image a = frame_image(out1, kind, s1[i].frame), b = frame_image(out2, kind, s1[i].frame);
+      EXPECT_TRUE(a.pixels == b.pixels) << kind << " differs at frame " << s1[i].frame;
+    }
+  }
+}
+
+TEST(Bake, StillSceneDoesNotChangeBetweenFrames) {
+  const fs::path meshes = fresh_dir("still_in"), out = fresh_dir("still_out");
+  TriMesh sphere = test::icosphere(4, 0.5);
+  sphere.velocities.assign(sphere.positions.size(), Vec3{});
+  for (int f = 1; f <= 3; ++f) write_ply((meshes / fmt::format("m.{:04d}.ply", f)).string(), sphere);
+  const auto stats = run(small_bake(meshes, out));
+  ASSERT_EQ(stats.size(), 3u);
+  EXPECT_EQ(stats[1].patches_born, 0u);
+  EXPECT_EQ(stats[2].patches_born, 0u);
+  for (const char* kind : {"color", "disp", "aov"}) {
+    const Image f1 = frame_image(out, kind, 1), f2 = frame_image(out, kind, 2), f3 = frame_image(out, kind, 3);
+    EXPECT_TRUE(f2.pixels == f3.pixels) << kind;
+    EXPECT_TRUE(f1.pixels == f2.pixels) << kind;
+  }
+}
+
+TEST(Bake, TextureMovesWithARigidlyTranslatingSurface) {
+  // The same sphere translated by d per frame with the exact velocity: the
+  // atlas (a function of the shape) is the same, so every texel must keep
+  // its patch and its exemplar coordinates.
+  const fs::path meshes = fresh_dir("rigid_in"), out = fresh_dir("rigid_out");
+  const Vec3 velocity{0.3, -0.2, 0.1};
+  for (int f = 1; f <= 4; ++f) {
+    TriMesh m = test::icosphere(4, 0.5);
+    for (Vec3& p : m.positions) p += velocity * (double(f - 1) / 24.0);
+    m.velocities.assign(m.positions.size(), velocity);
+    write_ply((meshes / fmt::format("m.{:04d}.ply", f)).string(), m);
+  }
+  const auto stats = run(small_bake(meshes, out));
+  const Image a = frame_image(out, "aov", 1), b = frame_image(out, "aov", 4);
+  const Image ca = frame_image(out, "color", 1);
+  std::size_t chart = 0, same = 0;
+  double max_duv = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      if (ca.at(x, y, 3) != 1.f) continue;
+      ++chart;
+      if (a.at(x, y, 0) != b.at(x, y, 0)) continue;
+      ++same;
+      max_duv = std::max({max_duv, double(std::abs(a.at(x, y, 1) - b.at(x, y, 1))),
+                          double(std::abs(a.at(x, y, 2) - b.at(x, y, 2)))});
+    }
+  ASSERT_GT(chart, 1000u);
+  EXPECT_GT(double(same) / double(chart), 0.995);
+  EXPECT_LT(max_duv, 2e-3);
+  EXPECT_EQ(stats.back().patches_born, 0u);
+}
+
+TEST(Bake, ACorruptFrameStopsWithItsNameAndLeavesEarlierFramesIntact) {
+  const fs::path meshes = demo_sequence("corrupt_in", 2), out = fresh_dir("corrupt_out");
+  {
+    // Frame 3: a binary PLY cut short in its vertex data.
+    const std::string good = (meshes / "m.0002.ply").string();
+    std::ifstream in(good, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), {});
+    std::ofstream bad((meshes / "m.0003.ply").string(), std::ios::binary);
+    bad.write(bytes.data(), std::streamsize(bytes.size() / 3));
+  }
+  BakeOptions o = small_bake(meshes, out);
+  std::vector<FrameStats> stats;
+  try {
+    resolve_bake_options(o);
+    bake(o, [&](const FrameStats& s) { stats.push_back(s); });
+    FAIL() << "a truncated frame must stop the bake";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("m.0003.ply"), std::string::npos) << e.what();
+    EXPECT_EQ(e.frame(), 3);
+  }
+  ASSERT_EQ(stats.size(), 2u);
+  for (int f = 1; f <= 2; ++f) EXPECT_EQ(frame_image(out, "color", f).width, 256);
+  for (const auto& entry : fs::directory_iterator(out))
+    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos) << entry.path();
+  EXPECT_FALSE(fs::exists(out / "t.color.0003.exr"));
+}
+
+TEST(BakeCli, SceneFileOptionsAreOverriddenByTheCommandLine) {
+  const fs::path meshes = demo_sequence("cli_in", 2), out = fresh_dir("cli_out");
+  const fs::path scene = meshes / "scene.toml";
+  {
+    std::ofstream toml(scene);
+    toml << "mesh = \"m.%04d.ply\"\nexemplar = \"" << LAPFLOW_SOURCE_DIR << "/exemplars/squares.color.png\"\n"
+         << "out = \"" << out.string() << "\"\nresolution = 128\nframes = \"1-2\"\nname = \"scene\"\n";
+  }
+  const std::string cmd = fmt::format("'{}' bake '{}' --resolution 192 --frames 1-1 --quiet", LAPFLOW_BINARY, scene.string());
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  const Image color = read_image((out / "scene.color.0001.exr").string(), ColorSpace::Linear);
+  EXPECT_EQ(color.width, 192);
+  EXPECT_FALSE(fs::exists(out / "scene.color.0002.exr"));
+  EXPECT_TRUE(fs::exists(out / "scene.0001.obj"));
+  EXPECT_TRUE(fs::exists(out / "scene.0001.mtl"));
+  EXPECT_TRUE(fs::exists(out / "scene.stats.jsonl"));
+}
+
+TEST(BakeCli, MissingExemplarIsABadInputExit) {
+  const fs::path meshes = demo_sequence("cli_bad_in", 1), out = fresh_dir("cli_bad_out");
+  const std::string cmd = fmt::format("'{}' bake --mesh '{}' --exemplar /nonexistent/x.png --out '{}' --quiet 2>/dev/null",
+                                      LAPFLOW_BINARY, (meshes / "m.%04d.ply").string(), out.string());
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 2);
+}
