@@ -18,6 +18,8 @@ namespace {
 /// Largest share of a chart's area allowed outside the density band: the
 /// atlas must keep 95% of the surface in the band, so charts keep 98%.
 constexpr double kMaxOutsideShare = 0.02;
+/// Largest share of a chart's uv area allowed outside the density band.
+constexpr double kMaxOutsideUvShare = 0.05;
 
 /// LSCM of one chart; writes 3 uv per triangle of `tris` (chart-local,
 /// density-normalised) into corner_uv. Returns false when the chart must be
@@ -124,12 +126,17 @@ bool flatten_one(const TriMesh& mesh, const TriangleInfo& info, const std::vecto
     sum_as += info.area[t] * dens[i];
   }
   const double mean = sum_a > 0 ? sum_as / sum_a : 1.0;
-  double outside = 0;
+  // Shares outside the band, by surface area and by atlas (uv) area: a
+  // sliver blown up in uv is tiny on the surface but wastes the atlas.
+  double outside = 0, outside_uv = 0, sum_uv = 0;
   for (std::size_t i = 0; i < tris.size(); ++i) {
+    if (info.degenerate[tris[i]] || dens[i] <= 0) continue;
     const double d = dens[i] / mean;
-    if (!info.degenerate[tris[i]] && (d < 1.0 / max_stretch || d > max_stretch)) outside += info.area[tris[i]];
+    const double auv = info.area[tris[i]] / (dens[i] * dens[i]);
+    sum_uv += auv;
+    if (d < 1.0 / max_stretch || d > max_stretch) outside += info.area[tris[i]], outside_uv += auv;
   }
-  if (outside > kMaxOutsideShare * sum_a && !force) return false;
+  if ((outside > kMaxOutsideShare * sum_a || outside_uv > kMaxOutsideUvShare * sum_uv) && !force) return false;
 
   Vec2 centre{};
   for (const Vec2& p : uv) centre += p;
@@ -193,6 +200,23 @@ std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const Triangl
     auto it = std::lower_bound(side.begin(), side.end(), std::make_pair(t, -1));
     return (it != side.end() && it->first == t) ? int(it - side.begin()) : -1;
   };
+  // A cut through the triangle strips of a fluid mesh is saw-toothed; a few
+  // sequential sweeps (in triangle order, so deterministic and free of the
+  // oscillation of simultaneous flips) move a triangle with two neighbours
+  // on the other side across.
+  for (int sweep = 0; sweep < 3; ++sweep) {
+    bool changed = false;
+    for (std::size_t i = 0; i < side.size(); ++i) {
+      int other = 0;
+      for (int k = 0; k < 3; ++k) {
+        const int32_t u = info.across[3 * std::size_t(side[i].first) + k];
+        const int j = u < 0 ? -1 : find(u);
+        other += j >= 0 && side[j].second != side[i].second;
+      }
+      if (other >= 2) side[i].second = 1 - side[i].second, changed = true;
+    }
+    if (!changed) break;
+  }
   std::vector<int> part(side.size(), -1);
   int parts = 0;
   std::vector<int> stack;

@@ -145,13 +145,47 @@ struct Profile {
 /// saw-tooth and concave outlines of fluid charts interlock instead of each
 /// claiming its whole bounding box.
 class HorizonPacker {
+  static constexpr double kTouch = 1e-6;  ///< blocks
+
  public:
   HorizonPacker(const Charts& charts, const std::vector<ChartFrame>& frames, const std::vector<Vec2>& corner_uv,
                 int resolution, int margin)
-      : charts_(charts), frames_(frames), uv_(corner_uv), n_(resolution), margin_(margin) {
+      : charts_(charts) {
     block_ = std::max(1, resolution / 1024);
     cols_ = resolution / block_;
     margin_blocks_ = (margin + block_ - 1) / block_;
+    // A region's extent in any vertical slab is reached on its boundary, so
+    // the outline (edges used by one triangle of the chart) is all the
+    // profiles need: far fewer segments than triangles.
+    outline_.resize(charts.count);
+    parallel_for(std::size_t(charts.count), [&](std::size_t b, std::size_t e) {
+      std::vector<std::pair<Vec2, Vec2>> edges;
+      auto less = [](const Vec2& a, const Vec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); };
+      for (std::size_t c = b; c < e; ++c) {
+        edges.clear();
+        for (int32_t i = charts.offsets[c]; i < charts.offsets[c + 1]; ++i)
+          for (int k = 0; k < 3; ++k) {
+            Vec2 a = corner_uv[3 * std::size_t(charts.triangles[i]) + k],
+                 d = corner_uv[3 * std::size_t(charts.triangles[i]) + (k + 1) % 3];
+            if (less(d, a)) std::swap(a, d);
+            edges.emplace_back(a, d);
+          }
+        std::sort(edges.begin(), edges.end(), [&](const auto& x, const auto& y) {
+          return less(x.first, y.first) || (x.first == y.first && less(x.second, y.second));
+        });
+        std::vector<std::pair<Vec2, Vec2>>& out = outline_[c];
+        for (std::size_t i = 0; i < edges.size();) {
+          std::size_t j = i + 1;
+          while (j < edges.size() && edges[j] == edges[i]) ++j;
+          if (j - i == 1) out.emplace_back(frames[c].apply(edges[i].first), frames[c].apply(edges[i].second));
+          i = j;
+        }
+        if (out.empty() && !edges.empty()) {
+          const Vec2 q = frames[c].apply(edges[0].first);
+          out.emplace_back(q, q);  // a chart collapsed to a point
+        }
+      }
+    }, 8);
   }
 
   struct Placement {
@@ -168,26 +202,72 @@ class HorizonPacker {
       for (std::size_t c = b; c < e; ++c)
         for (int o = 0; o < 4; ++o) prof[c][o] = profile(int(c), o, scale);
     }, 8);
-    // Large charts first: they shape the horizon that small ones fill.
-    std::vector<int> order(nc);
-    std::iota(order.begin(), order.end(), 0);
-    std::vector<double> key(nc);
-    for (int c = 0; c < nc; ++c) key[c] = double(prof[c][0].width) * prof[c][0].height;
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] > key[b]; });
+    // Large charts first: they shape the horizon that small ones fill. Two
+    // orders (by box area, by box height) and the better of the two.
+    int best_used = INT32_MAX;
+    std::vector<Placement> trial;
+    // Thousands of droplet charts: one order is enough and halves the cost.
+    const int orders = nc > 400 ? 1 : 2;
+    for (int by_height = 0; by_height < orders; ++by_height) {
+      std::vector<int> order(nc);
+      std::iota(order.begin(), order.end(), 0);
+      std::vector<double> key(nc);
+      for (int c = 0; c < nc; ++c)
+        key[c] = by_height ? double(std::max(prof[c][0].width, prof[c][0].height))
+                           : double(prof[c][0].width) * prof[c][0].height;
+      std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] > key[b]; });
+      const int used = drop(prof, order, trial);
+      if (used < best_used) best_used = used, placement = trial;
+    }
+    return best_used;
+  }
 
+  int rows_available() const { return cols_ * block_; }
+
+ private:
+  /// Drops the charts in `order` onto the horizon; returns the height used (texels).
+  int drop(const std::vector<std::array<Profile, 4>>& prof, const std::vector<int>& order,
+           std::vector<Placement>& placement) const {
+    const int nc = int(prof.size());
     std::vector<int> sky(cols_, 0);
     int top = 0;
     placement.assign(nc, {});
+    std::vector<int> steps, candidates;
+    std::vector<std::pair<int, int>> lows;  // (horizon height, column) of each step
+    const std::size_t kSteps = nc > 400 ? 24 : 64;
     for (int c : order) {
       double best_score = INFINITY;
       int best_o = 0, best_x = 0, best_y = 0;
+      // Candidate columns: against every step of the horizon (left or right
+      // aligned), as skyline packers do, plus a stride across the whole width
+      // for wide charts whose outline may interlock anywhere. Keeps the cost
+      // low with thousands of droplet charts.
+      // Only the lowest steps: a ragged horizon under thousands of droplet
+      // charts has hundreds, and a low step is where bottom-left wins.
+      lows.clear();
+      lows.emplace_back(sky[0], 0);
+      for (int x = 1; x < cols_; ++x)
+        if (sky[x] != sky[x - 1]) lows.emplace_back(std::min(sky[x], sky[x - 1]), x);
+      if (lows.size() > kSteps) {
+        std::nth_element(lows.begin(), lows.begin() + kSteps, lows.end());
+        lows.resize(kSteps);
+      }
+      steps.clear();
+      for (const auto& [h, x] : lows) steps.push_back(x);
+      steps.push_back(cols_);
       for (int o = 0; o < 4; ++o) {
         const Profile& p = prof[c][o];
         if (p.width > cols_) continue;
-        // Every column for narrow charts; a stride for wide ones (their
-        // placement matters less per column and they dominate the cost).
-        const int stride = std::max(1, p.width / 16);
-        for (int x0 = 0; x0 + p.width <= cols_; x0 = (x0 + stride + p.width > cols_ && x0 + p.width < cols_) ? cols_ - p.width : x0 + stride) {
+        candidates.clear();
+        for (int x : steps) {
+          if (x + p.width <= cols_) candidates.push_back(x);
+          if (x - p.width >= 0) candidates.push_back(x - p.width);
+        }
+        if (p.width > 16)
+          for (int x = 0; x + p.width <= cols_; x += std::max({1, p.width / 16, cols_ / 64})) candidates.push_back(x);
+        std::sort(candidates.begin(), candidates.end());
+        candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+        for (int x0 : candidates) {
           int y = 0;
           for (int i = 0; i < p.width; ++i)
             if (p.lo[i] <= p.hi[i]) y = std::max(y, sky[x0 + i] - p.lo[i]);
@@ -217,19 +297,12 @@ class HorizonPacker {
     return top * block_;
   }
 
-  int rows_available() const { return cols_ * block_; }
-
- private:
   Profile profile(int c, int o, double scale) const {
     Profile p;
-    const ChartFrame& f = frames_[c];
+    const auto& segs = outline_[c];
     Vec2 lo{INFINITY, INFINITY};
-    auto local = [&](const Vec2& uv) { return orient(f.apply(uv) * scale, o); };
-    for (int32_t i = charts_.offsets[c]; i < charts_.offsets[c + 1]; ++i)
-      for (int k = 0; k < 3; ++k) {
-        const Vec2 q = local(uv_[3 * std::size_t(charts_.triangles[i]) + k]);
-        lo = {std::min(lo.x, q.x), std::min(lo.y, q.y)};
-      }
+    for (const auto& [a, d] : segs)
+      for (const Vec2& q : {orient(a * scale, o), orient(d * scale, o)}) lo = {std::min(lo.x, q.x), std::min(lo.y, q.y)};
     if (!std::isfinite(lo.x)) lo = {0, 0};
     // A quarter texel in from the block corner keeps footprints off exact
     // texel boundaries; the margin ring is added in whole blocks.
@@ -239,28 +312,22 @@ class HorizonPacker {
     std::vector<int> lo_c, hi_c;
     auto touch = [&](int col, double y0, double y1) {
       if (col >= int(lo_c.size())) lo_c.resize(col + 1, INT32_MAX), hi_c.resize(col + 1, INT32_MIN);
-      lo_c[col] = std::min(lo_c[col], int(std::floor(y0 / b)));
-      hi_c[col] = std::max(hi_c[col], int(std::floor(y1 / b)));
+      // The slack claims a block the outline only touches (or may touch
+      // after rounding of the final placement).
+      lo_c[col] = std::min(lo_c[col], int(std::floor(y0 / b - kTouch)));
+      hi_c[col] = std::max(hi_c[col], int(std::floor(y1 / b + kTouch)));
     };
-    for (int32_t i = charts_.offsets[c]; i < charts_.offsets[c + 1]; ++i) {
-      Vec2 v[3];
-      for (int k = 0; k < 3; ++k) v[k] = local(uv_[3 * std::size_t(charts_.triangles[i]) + k]) + shift;
-      const double xmin = std::min({v[0].x, v[1].x, v[2].x}), xmax = std::max({v[0].x, v[1].x, v[2].x});
-      const int c0 = int(std::floor(xmin / b)), c1 = int(std::floor(xmax / b));
+    for (const auto& [a0, d0] : segs) {
+      Vec2 a = orient(a0 * scale, o) + shift, d = orient(d0 * scale, o) + shift;
+      if (d.x < a.x) std::swap(a, d);
+      const int c0 = std::max(0, int(std::floor(a.x / b - kTouch))), c1 = int(std::floor(d.x / b + kTouch));
       for (int col = c0; col <= c1; ++col) {
-        // y-range of the triangle inside the slab [col*b, (col+1)*b].
-        const double sx0 = std::max(xmin, double(col * b)), sx1 = std::min(xmax, double((col + 1) * b));
-        double y0 = INFINITY, y1 = -INFINITY;
-        for (int k = 0; k < 3; ++k) {
-          const Vec2 a = v[k], e = v[(k + 1) % 3];
-          if (a.x >= sx0 && a.x <= sx1) y0 = std::min(y0, a.y), y1 = std::max(y1, a.y);
-          for (double sx : {sx0, sx1}) {
-            if ((a.x - sx) * (e.x - sx) > 0 || a.x == e.x) continue;
-            const double y = a.y + (e.y - a.y) * (sx - a.x) / (e.x - a.x);
-            y0 = std::min(y0, y), y1 = std::max(y1, y);
-          }
-        }
-        if (y0 <= y1) touch(col, y0, y1);
+        // The segment clipped to the slab [col*b, (col+1)*b].
+        const double sx0 = std::max(a.x, double(col * b)), sx1 = std::min(d.x, double((col + 1) * b));
+        const double dx = d.x - a.x;
+        const double y0 = dx > 0 ? a.y + (d.y - a.y) * (sx0 - a.x) / dx : a.y;
+        const double y1 = dx > 0 ? a.y + (d.y - a.y) * (sx1 - a.x) / dx : d.y;
+        touch(col, std::min(y0, y1), std::max(y0, y1));
       }
     }
     const int w = int(lo_c.size());
@@ -283,9 +350,8 @@ class HorizonPacker {
   }
 
   const Charts& charts_;
-  const std::vector<ChartFrame>& frames_;
-  const std::vector<Vec2>& uv_;
-  int n_, margin_, block_ = 1, cols_ = 0, margin_blocks_ = 0;
+  std::vector<std::vector<std::pair<Vec2, Vec2>>> outline_;  ///< per chart, in its min-area frame (metres)
+  int block_ = 1, cols_ = 0, margin_blocks_ = 0;
 };
 
 }  // namespace
@@ -387,6 +453,16 @@ PackResult pack_charts(const Charts& charts, int resolution, int margin, std::ve
       if (!(next > lo && next < hi)) next = std::isfinite(hi) ? 0.5 * (lo + hi) : lo * 1.1;
       s = next;
     }
+    // The used height is not monotonic in the scale (a chart that no longer
+    // fits a gap moves up): probe a few scales above the best to exploit it.
+    for (const double f : {1.008, 1.016, 1.025, 1.035, 1.05}) {
+      if (!(best * f < hi * 1.06)) break;
+      if (packer.pack(best * f, trial) <= avail) {
+        place = trial;
+        best = best * f;
+        hi = std::max(hi, best);
+      }
+    }
   }
   result.texels_per_metre = best;
 
@@ -408,7 +484,7 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
   // buffer that stays in cache: triangles in increasing index claim only free
   // texels, so ties on shared edges go to the lowest index without atomics.
   // Two passes (count, then fill at the band's offset) keep the output sorted
-  // without a full-size owner image or a merge.
+  // without a merge.
   const int n = resolution;
   const std::size_t nt = corner_uv.size() / 3;
   constexpr int kBand = 16;
@@ -464,12 +540,14 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
     return row0;
   };
 
+  // Band owner buffers are kept between the passes (a quarter of the size
+  // of the output arrays; cheaper than rasterising twice).
+  std::vector<std::vector<int32_t>> owners(bands);
   std::vector<std::size_t> count(std::size_t(bands) + 1, 0);
   parallel_for(std::size_t(bands), [&](std::size_t b, std::size_t e) {
-    std::vector<int32_t> owner;
     for (std::size_t k = b; k < e; ++k) {
-      raster_band(int(k), owner);
-      count[k + 1] = std::size_t(std::count_if(owner.begin(), owner.end(), [](int32_t t) { return t != INT32_MAX; }));
+      raster_band(int(k), owners[k]);
+      count[k + 1] = std::size_t(std::count_if(owners[k].begin(), owners[k].end(), [](int32_t t) { return t != INT32_MAX; }));
     }
   }, 1);
   for (int k = 0; k < bands; ++k) count[k + 1] += count[k];
@@ -486,9 +564,9 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
     }
   }, 1);
   parallel_for(std::size_t(bands), [&](std::size_t b, std::size_t e) {
-    std::vector<int32_t> owner;
     for (std::size_t k = b; k < e; ++k) {
-      const int row0 = raster_band(int(k), owner);
+      std::vector<int32_t> owner = std::move(owners[k]);
+      const int row0 = int(k) * kBand;
       std::size_t out = count[k];
       for (std::size_t i = 0; i < owner.size(); ++i) {
         const int32_t t = owner[i];
