@@ -239,3 +239,26 @@ TEST(DemoScene, WritesAPlySequenceWithVelocities) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+TEST(DemoCommand, WritesTheSequenceAndASummary) {
+  test::TempDir scratch("demo_cli");
+  const std::string out = scratch / "seq";
+  std::string stdout_text, stderr_text;
+  const int code = test::run_command(std::string(LAPFLOW_BINARY) + " demo --out '" + out +
+                                         "' --frames 3 --resolution 40 --case slab --name s --threads 1",
+                                     &stdout_text, &stderr_text, scratch);
+  EXPECT_EQ(code, 0) << stderr_text;
+  for (int f = 1; f <= 3; ++f) EXPECT_TRUE(std::filesystem::exists(demo_frame_path(out, "s", f))) << f;
+  EXPECT_FALSE(std::filesystem::exists(demo_frame_path(out, "s", 4)));
+  EXPECT_NE(stderr_text.find("triangles per frame: min"), std::string::npos) << stderr_text;
+  // Usage mistakes exit with 2.
+  EXPECT_EQ(test::run_command(std::string(LAPFLOW_BINARY) + " demo --out '" + out + "' --case ocean", nullptr,
+                              nullptr, scratch),
+            2);
+}
+
+}  // namespace
+}  // namespace lapflow
