@@ -1,16 +1,153 @@
-// lapflow_bench: `lapflow_bench raster [N...]` times the rasterizer alone.
+// lapflow_bench: speed and memory of the stages and of the whole bake, on
+// generated scenes and on ../shared/data. Numbers go in the README.
+//
+//   lapflow_bench                 every benchmark below, each bake in its own process (peak RSS per run)
+//   lapflow_bench bake-demo N R   one bake of the ~100k-triangle demo at N x N, radius R (0 = ~5k patches)
+//   lapflow_bench bake-data DIR N one bake of DIR/<scene>.%04d.ply at N x N
+//   lapflow_bench raster [N...]   the rasterizer alone at the given resolutions
+//   lapflow_bench atlas [DATA]    the surface atlas alone
+//   lapflow_bench patches [DATA]  the patch stages alone
+#include <fmt/format.h>
+
+#include <cmath>
 #include <cstdlib>
-#include <cstring>
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include "bench.hpp"
+#include "lapflow/demo_scene.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/parallel.hpp"
+#include "lapflow/pipeline.hpp"
+
+namespace fs = std::filesystem;
+using namespace lapflow;
+
+namespace {
+
+std::string source_dir() { return LAPFLOW_SOURCE_DIR; }
+
+/// Bakes and prints one table row: mean seconds per stage over the frames
+/// after the first (the first frame seeds), and the peak RSS of the process.
+void run_bake(const std::string& label, BakeOptions o) {
+  resolve_bake_options(o);
+  std::vector<FrameStats> stats;
+  bake(o, [&](const FrameStats& s) { stats.push_back(s); });
+  FrameStats mean;
+  std::size_t n = 0, patches = 0, tris = 0;
+  for (std::size_t i = stats.size() > 1 ? 1 : 0; i < stats.size(); ++i, ++n) {
+    const FrameStats& s = stats[i];
+    mean.seconds_read += s.seconds_read;
+    mean.seconds_advect += s.seconds_advect;
+    mean.seconds_atlas += s.seconds_atlas;
+    mean.seconds_raster += s.seconds_raster;
+    mean.seconds_write += s.seconds_write;
+    mean.seconds_total += s.seconds_total;
+    patches += s.patches_alive;
+    tris += s.triangles;
+  }
+  const double k = n ? 1.0 / double(n) : 0;
+  fmt::print("| {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | **{:.2f}** | {:.0f} | {:.2f} |\n", label,
+             o.atlas.resolution, tris / std::max<std::size_t>(n, 1), patches / std::max<std::size_t>(n, 1),
+             mean.seconds_read * k, mean.seconds_advect * k, mean.seconds_atlas * k, mean.seconds_raster * k,
+             mean.seconds_write * k, mean.seconds_total * k, peak_rss_mb(), stats.empty() ? 0.0 : stats[0].seconds_total);
+  std::fflush(stdout);
+}
+
+BakeOptions base_options(const std::string& out) {
+  BakeOptions o;
+  o.exemplar_color = source_dir() + "/exemplars/pebbles.color.png";
+  o.exemplar_feature = source_dir() + "/exemplars/pebbles.feature.png";
+  o.exemplar_displacement = source_dir() + "/exemplars/pebbles.disp.png";
+  o.out_dir = out;
+  o.name = "bench";
+  return o;
+}
+
+/// The demo's vortex at about 100k triangles per frame, written once.
+std::string demo_frames(int frames) {
+  const fs::path dir = fs::temp_directory_path() / "lapflow_bench_demo100k";
+  DemoOptions d;
+  d.frames = frames;
+  d.voxel_size = demo_voxel_size_for(DemoCase::Vortex, 100000);
+  if (!fs::exists(dir / fmt::format("demo.{:04d}.ply", frames))) {
+    fs::create_directories(dir);
+    for (int f = 1; f <= frames; ++f) write_ply((dir / fmt::format("demo.{:04d}.ply", f)).string(), demo_frame(d, f));
+  }
+  return (dir / "demo.%04d.ply").string();
+}
+
+void bake_demo(int resolution, double radius) {
+  const std::string pattern = demo_frames(6);
+  BakeOptions o = base_options((fs::temp_directory_path() / "lapflow_bench_out").string());
+  o.mesh_pattern = pattern;
+  o.frames = FrameRange{1, 6};
+  o.atlas.resolution = resolution;
+  if (radius <= 0) {
+    // Poisson-disk samples at distance r cover about 0.8 A / r^2: aim at 5k.
+    const double area = surface_area(read_mesh(FramePattern(pattern).path(1)));
+    radius = std::sqrt(0.8 * area / 5000);
+  }
+  o.patch.radius = radius;
+  run_bake(fmt::format("demo vortex ~100k tris, r={:.4f}", radius), o);
+}
+
+void bake_data(const std::string& pattern, int resolution, int first, int last) {
+  BakeOptions o = base_options((fs::temp_directory_path() / "lapflow_bench_out").string());
+  o.mesh_pattern = pattern;
+  o.frames = FrameRange{first, last};
+  o.atlas.resolution = resolution;
+  o.patch.radius = 0.04;
+  run_bake(fmt::format("{} {}-{}, r=0.04", fs::path(pattern).filename().string(), first, last), o);
+}
+
+void header() {
+  fmt::print("| scene | atlas | triangles | patches | read s | advect s | atlas s | raster s | write s | total s/frame | peak RSS MiB | first frame s |\n");
+  fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && std::strcmp(argv[1], "raster") == 0) {
-    std::vector<int> sizes;
-    for (int i = 2; i < argc; ++i) sizes.push_back(std::atoi(argv[i]));
-    if (sizes.empty()) sizes = {2048, 4096, 6144};
-    lapflow::bench::bench_raster(sizes);
+  const std::vector<std::string> args(argv + 1, argv + argc);
+  const std::string data = source_dir() + "/../shared/data";
+  const std::string self = fs::read_symlink("/proc/self/exe").string();
+  if (args.size() >= 2 && args[0] == "bake-demo") {
+    bake_demo(std::stoi(args[1]), args.size() > 2 ? std::stod(args[2]) : 0);
+    return 0;
   }
+  if (args.size() >= 3 && args[0] == "bake-data") {
+    bake_data(args[1], std::stoi(args[2]), 20, 26);
+    return 0;
+  }
+  if (!args.empty() && args[0] == "raster") {
+    std::vector<int> sizes;
+    for (std::size_t i = 1; i < args.size(); ++i) sizes.push_back(std::stoi(args[i]));
+    if (sizes.empty()) sizes = {2048, 4096, 6144};
+    bench::bench_raster(sizes);
+    return 0;
+  }
+  if (!args.empty() && args[0] == "atlas") {
+    bench::bench_atlas(args.size() > 1 ? args[1] : data);
+    return 0;
+  }
+  if (!args.empty() && args[0] == "patches") {
+    bench::bench_patches(args.size() > 1 ? args[1] : data);
+    return 0;
+  }
+  fmt::print("lapflow_bench on {} threads\n\n## Patches\n\n", thread_count());
+  bench::bench_patches(data);
+  fmt::print("\n## Surface atlas\n\n");
+  bench::bench_atlas(data);
+  fmt::print("\n## Rasterizer alone\n\n");
+  bench::bench_raster({2048, 4096, 6144});
+  fmt::print("\nBake, mean per frame over frames 2-6 (frame 1 seeds):\n\n");
+  header();
+  for (int n : {2048, 4096, 6144})
+    if (std::system(fmt::format("'{}' bake-demo {}", self, n).c_str()) != 0) return 1;
+  if (fs::exists(data + "/dam_break/dam_break.0020.ply"))
+    if (std::system(fmt::format("'{}' bake-data '{}' 4096", self, data + "/dam_break/dam_break.%04d.ply").c_str()) != 0)
+      return 1;
   return 0;
 }
