@@ -99,6 +99,8 @@ void run_patches(const PatchesCommand& c) {
   if (!(c.fps > 0)) throw UsageError("--fps must be positive");
   if (!(c.spacing > 0)) throw UsageError("--spacing must be positive");
   if (!(c.delta_max > 1)) throw UsageError("--delta-max must be greater than 1");
+  Vec3 align_direction;
+  const bool align = parse_orientation(c.orientation, align_direction);
   const FramePattern meshes(c.mesh_pattern);
   std::optional<FrameRange> range;
   if (!c.frames.empty()) range = parse_frame_range(c.frames);
@@ -114,7 +116,8 @@ void run_patches(const PatchesCommand& c) {
   po.radius = c.radius;
   po.remesh = c.remesh;
   po.seed = globals().seed;
-  po.align = parse_orientation(c.orientation, po.align_direction);
+  po.align = align;
+  po.align_direction = align_direction;
   SeedOptions so;
   so.spacing = c.spacing;
   WeightOptions wo;
