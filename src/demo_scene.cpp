@@ -60,38 +60,14 @@ double trace_step(DemoCase scene) { return 1.0 / (16 * (scene == DemoCase::Vorte
 
 double pseudo_time(double t, double period) { return period / kPi * std::sin(kPi * t / period); }
 
-/// sin(pi x) and cos(pi x) by Taylor series after reduction to |pi r| <=
-/// pi/2 (error below 1e-9). The trace spends two thirds of its time in libm's
-/// sincos otherwise; plain arithmetic is also the same on every machine.
-inline void sincos_pi(double x, double& s, double& c) {
-  // Nearest integer without libm (floor is a call without SSE4.1); the trace
-  // stays within a few metres of the box, far inside the offset.
-  const int64_t n = int64_t(x + 0.5 + 4096.0) - 4096;
-  const double a = kPi * (x - double(n)), a2 = a * a;
-  constexpr double s3 = 1.0 / 6, s5 = 1.0 / 20, s7 = 1.0 / 42, s9 = 1.0 / 72, s11 = 1.0 / 110, s13 = 1.0 / 156;
-  constexpr double c2 = 1.0 / 2, c4 = 1.0 / 12, c6 = 1.0 / 30, c8 = 1.0 / 56, c10 = 1.0 / 90, c12 = 1.0 / 132,
-                   c14 = 1.0 / 182;
-  s = a * (1 - a2 * s3 * (1 - a2 * s5 * (1 - a2 * s7 * (1 - a2 * s9 * (1 - a2 * s11 * (1 - a2 * s13))))));
-  c = 1 - a2 * c2 * (1 - a2 * c4 * (1 - a2 * c6 * (1 - a2 * c8 * (1 - a2 * c10 * (1 - a2 * c12 * (1 - a2 * c14))))));
-  if (n & 1) s = -s, c = -c;
-}
-
-/// U(x): the field without its time factor. `Fast` picks the series sin/cos
-/// for the trace; the velocities handed out use libm.
-template <bool Fast>
+/// U(x): the field without its time factor.
 Vec3 steady_velocity(DemoCase scene, const Vec3& p) {
-  double sx, cx, sy, cy, sz = 0, cz = 0;
-  if constexpr (Fast) {
-    sincos_pi(p.x, sx, cx);
-    sincos_pi(p.y, sy, cy);
-    if (scene == DemoCase::Vortex) sincos_pi(p.z, sz, cz);
-  } else {
-    sx = std::sin(kPi * p.x), cx = std::cos(kPi * p.x);
-    sy = std::sin(kPi * p.y), cy = std::cos(kPi * p.y);
-    sz = std::sin(kPi * p.z), cz = std::cos(kPi * p.z);
-  }
+  // sin(2a) = 2 sin(a) cos(a): three sincos calls per evaluation, not six.
+  const double sx = std::sin(kPi * p.x), cx = std::cos(kPi * p.x);
+  const double sy = std::sin(kPi * p.y), cy = std::cos(kPi * p.y);
   const double s2x = 2 * sx * cx, s2y = 2 * sy * cy;
   if (scene == DemoCase::Vortex) {
+    const double sz = std::sin(kPi * p.z), cz = std::cos(kPi * p.z);
     const double s2z = 2 * sz * cz;
     return {2 * sx * sx * s2y * s2z, -s2x * sy * sy * s2z, -s2x * s2y * sz * sz};
   }
@@ -104,10 +80,10 @@ Vec3 flow(DemoCase scene, Vec3 x, double tau) {
   const int steps = std::max(1, int(std::ceil(std::abs(tau) / trace_step(scene))));
   const double h = tau / steps;
   for (int i = 0; i < steps; ++i) {
-    const Vec3 k1 = steady_velocity<true>(scene, x);
-    const Vec3 k2 = steady_velocity<true>(scene, x + k1 * (0.5 * h));
-    const Vec3 k3 = steady_velocity<true>(scene, x + k2 * (0.5 * h));
-    const Vec3 k4 = steady_velocity<true>(scene, x + k3 * h);
+    const Vec3 k1 = steady_velocity(scene, x);
+    const Vec3 k2 = steady_velocity(scene, x + k1 * (0.5 * h));
+    const Vec3 k3 = steady_velocity(scene, x + k2 * (0.5 * h));
+    const Vec3 k4 = steady_velocity(scene, x + k3 * h);
     x += (k1 + 2.0 * k2 + 2.0 * k3 + k4) * (h / 6.0);
   }
   return x;
@@ -280,7 +256,7 @@ double signed_volume(const TriMesh& m) {
 }  // namespace
 
 Vec3 demo_velocity(DemoCase scene, const Vec3& p, double t, double period) {
-  return steady_velocity<false>(scene, p) * std::cos(kPi * t / period);
+  return steady_velocity(scene, p) * std::cos(kPi * t / period);
 }
 
 Vec3 demo_flow_map(DemoCase scene, const Vec3& p, double t0, double t1, double period) {
