@@ -87,7 +87,9 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       if (!is_finite(x)) continue;
       const ClosestHit hit = next.closest(x, max_proj);
       if (hit.found && hit.distance <= max_proj) {
-        m.position = hit.point;
+        // A point already on the surface stays bit for bit (stillness: zero
+        // velocity on an unchanged mesh must not let rounding creep).
+        if (hit.distance > 1e-9 * r) m.position = hit.point;
         m.triangle = hit.triangle;
         m.kept = true;
       }

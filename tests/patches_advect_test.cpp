@@ -270,3 +270,21 @@ TEST(PatchesWeights, FoldedTriangleHasZeroQuality) {
   EXPECT_EQ(p->triangle_quality[0], 0.f);
   EXPECT_FALSE(std::isfinite(p->triangle_delta[0]));
 }
+
+TEST(PatchesAdvect, StillnessIsBitForBit) {
+  const TriMesh sphere = test::icosphere(4, 1.0);
+  SurfaceQuery q(sphere);
+  PatchOptions po;
+  po.radius = 0.3;
+  PatchSet set;
+  seed_patches(q, 0, po, {}, {}, set);
+  const VelocityField still = [](const Vec3&) { return Vec3{}; };
+  PatchSet moved = set;
+  for (int f = 0; f < 3; ++f) advect_patches(q, still, still, po, {}, {}, moved);
+  ASSERT_EQ(moved.patches.size(), set.patches.size());
+  for (std::size_t i = 0; i < set.patches.size(); ++i) {
+    EXPECT_EQ(moved.patches[i].positions, set.patches[i].positions);
+    EXPECT_EQ(moved.patches[i].weight, set.patches[i].weight);
+    EXPECT_EQ(moved.patches[i].triangles, set.patches[i].triangles);
+  }
+}
