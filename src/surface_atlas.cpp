@@ -91,7 +91,10 @@ SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& option
   atlas.corner_uv = atlas_detail::flatten_charts(mesh, info, charts, options.max_stretch, max_chart_area);
   atlas.report.seconds_lscm = seconds_since(clock);
 
-  atlas_detail::pack_charts(charts, options.resolution, options.gutter, atlas.corner_uv);
+  const atlas_detail::PackResult packed =
+      atlas_detail::pack_charts(charts, options.resolution, options.gutter, atlas.corner_uv);
+  atlas.report.texels_per_metre = packed.texels_per_metre;
+  atlas.report.packing_overflow = packed.overflow;
   atlas.report.seconds_pack = seconds_since(clock);
 
   atlas.texels = atlas_detail::build_texel_map(atlas.corner_uv, options.resolution);

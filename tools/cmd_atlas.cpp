@@ -59,6 +59,7 @@ void run(const AtlasCommand& o) {
   const double read_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const SurfaceAtlas atlas = build_surface_atlas(mesh, o.atlas);
   const AtlasReport& r = atlas.report;
+  if (r.packing_overflow) warn("{}: too many charts for a {}x{} atlas: packed without gutter", o.mesh, o.atlas.resolution, o.atlas.resolution);
   const double atlas_seconds = r.seconds_charts + r.seconds_lscm + r.seconds_pack + r.seconds_texels;
 
   UvMeshMaterial material;
@@ -87,6 +88,8 @@ void run(const AtlasCommand& o) {
     j["density_p95_high"] = r.density_p95_high;
     j["area_in_density_bounds"] = r.area_in_density_bounds;
     j["flipped_triangles"] = r.flipped_triangles;
+    j["texels_per_metre"] = r.texels_per_metre;
+    j["packing_overflow"] = r.packing_overflow;
     j["seconds"] = {{"read", read_seconds}, {"charts", r.seconds_charts}, {"lscm", r.seconds_lscm},
                     {"pack", r.seconds_pack}, {"texels", r.seconds_texels}, {"atlas", atlas_seconds}};
     j["obj"] = o.out;
@@ -98,6 +101,9 @@ void run(const AtlasCommand& o) {
     fmt::print("atlas           {}x{} texels, gutter {} texels, {} threads\n", o.atlas.resolution, o.atlas.resolution,
                o.atlas.gutter, thread_count());
     fmt::print("charts          {}\n", r.charts);
+    fmt::print("density         {:.1f} texels per metre ({:.3g} mm per texel){}\n", r.texels_per_metre,
+               r.texels_per_metre > 0 ? 1000 / r.texels_per_metre : 0.0,
+               r.packing_overflow ? "; gutter dropped: too many charts for this resolution" : "");
     fmt::print("utilization     {:.1f}% ({} chart texels)\n", 100 * r.utilization, atlas.texels.size());
     fmt::print("texel density   95% of the area within [{:.3f}, {:.3f}] of the mean; {:.1f}% of the area in [0.8, 1.25]\n",
                r.density_p95_low, r.density_p95_high, 100 * r.area_in_density_bounds);

@@ -14,8 +14,16 @@ namespace lapflow {
 
 struct AtlasOptions {
   int resolution = 2048;    ///< atlas width = height in texels
-  int gutter = 4;           ///< empty texels kept around every chart
-  double max_stretch = 1.25;  ///< chart is split when its texel-density spread exceeds this
+  /// Texels owned by every chart around its footprint (every texel its
+  /// triangles touch): footprints dilated by `gutter` never overlap, so two
+  /// charts are at least 2 * gutter texels apart and each can be dilated by
+  /// `gutter` texels. Dropped to 0 (report.packing_overflow) only when the
+  /// charts cannot be separated at this resolution at all.
+  int gutter = 4;
+  /// A chart is split and redone when more than 2% of its surface area (or 5%
+  /// of its uv area) has a texel density outside [1/max_stretch, max_stretch]
+  /// of the chart's mean.
+  double max_stretch = 1.25;
 };
 
 /// Every chart texel (centre inside a chart triangle), sorted by texel index
@@ -34,6 +42,8 @@ struct AtlasReport {
   double density_p95_high = 0;  ///<   that bound 95% of the surface area
   double area_in_density_bounds = 0;  ///< share of surface area with density in [0.8, 1.25]
   std::size_t flipped_triangles = 0;
+  double texels_per_metre = 0;    ///< the one density of every chart (texels per metre on the surface)
+  bool packing_overflow = false;  ///< true when the gutter had to be dropped to fit the charts
   double seconds_charts = 0, seconds_lscm = 0, seconds_pack = 0, seconds_texels = 0;
 };
 
@@ -49,6 +59,15 @@ struct SurfaceAtlas {
 /// Builds the atlas. Never fails on legal input (non-manifold, degenerate,
 /// many components, empty): a chart that does not flatten well is split and
 /// redone, never dropped. Deterministic at any thread count.
+///
+/// Charts grow across manifold, consistently oriented edges only (a
+/// non-manifold edge or vertex is a chart boundary). Degenerate triangles
+/// (repeated index, area below 1e-12 of the squared bounding-box diagonal, or
+/// height below 1e-8 of their longest edge) join the chart of a proper
+/// triangle sharing a vertex and collapse onto that vertex's uv (zero uv area:
+/// they claim no texel); a degenerate triangle with no such neighbour gets a
+/// chart of its own, a point. Throws UsageError for a resolution outside
+/// [1, 65536], a negative gutter or max_stretch <= 1.
 SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& options);
 
 }  // namespace lapflow
