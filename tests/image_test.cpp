@@ -106,6 +106,35 @@ TEST(ImageIo, Png16BitDataMapsStayLinear) {
   }
 }
 
+TEST(ImageIo, JpegTiffAndExrReadAlike) {
+  // Other formats and bit depths, written by OpenImageIO's own oiiotool: an
+  // sRGB file decodes to the same linear values whatever its container.
+  if (std::system("oiiotool --help >/dev/null 2>&1") != 0) GTEST_SKIP() << "oiiotool is not installed";
+  TempDir dir("formats");
+  Image img(32, 16, 3);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 32; ++x)
+      for (int c = 0; c < 3; ++c) img.at(x, y, c) = srgb_to_linear(float(x * 8 + c * 2) / 255.f);
+  write_png(dir / "src.png", img, true);
+  const std::string src = dir / "src.png";
+  struct Case {
+    std::string name, args;
+    float tolerance;
+  };
+  for (const Case& c : {Case{"u16.tif", "-d uint16", 1e-5f}, Case{"f32.tif", "-d float", 1e-5f},
+                        Case{"q.jpg", "--attrib Compression jpeg:100", 0.02f},
+                        Case{"lin.exr", "--colorconvert sRGB linear -d float", 1e-4f}}) {
+    const std::string out = dir / c.name;
+    ASSERT_EQ(std::system(("oiiotool '" + src + "' " + c.args + " -o '" + out + "' >/dev/null 2>&1").c_str()), 0)
+        << c.name;
+    const Image back = read_image(out);
+    ASSERT_EQ(back.width, 32);
+    ASSERT_EQ(back.channels, 3);
+    for (std::size_t i = 0; i < img.pixels.size(); ++i)
+      ASSERT_NEAR(back.pixels[i], img.pixels[i], c.tolerance) << c.name << " index " << i;
+  }
+}
+
 TEST(ImageIo, SampleBilinearHasVZeroAtTheBottomRow) {
   Image img(2, 2, 1);
   img.at(0, 0, 0) = 0;  // top left
@@ -267,6 +296,29 @@ TEST(ImageIo, WritesAreAtomic) {
   EXPECT_EQ(test::read_bytes(dir / "keep.nosuchformat"), "precious");
   EXPECT_TRUE(fs::is_directory(dir / "folder.exr"));
   EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "a.png", "folder.exr", "keep.nosuchformat"}));
+}
+
+}  // namespace
+}  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+TEST(Exemplar, ShippedExemplarsLoadWithFullRangeFeatureMaps) {
+  const std::string dir = LAPFLOW_SOURCE_DIR "/exemplars/";
+  for (const char* name : {"pebbles", "lava", "squares", "scales", "foam"}) {
+    const std::string base = dir + name;
+    const Exemplar ex = load_exemplar(base + ".color.png", base + ".feature.png", base + ".disp.png");
+    EXPECT_EQ(ex.name, name);
+    EXPECT_GE(ex.color.width, 512) << name;
+    EXPECT_LE(ex.color.width, 1024) << name;
+    EXPECT_EQ(ex.feature.width, ex.color.width) << name;
+    EXPECT_EQ(ex.displacement.height, ex.color.height) << name;
+    // Erosion needs both ends: element centres near 1, borders near 0.
+    const auto [lo, hi] = std::minmax_element(ex.feature.pixels.begin(), ex.feature.pixels.end());
+    EXPECT_LT(*lo, 0.05f) << name;
+    EXPECT_GT(*hi, 0.95f) << name;
+  }
 }
 
 }  // namespace
