@@ -216,8 +216,7 @@ void scales(double x, double y, Rgb& c, double& f, double& d) {
     for (int i = i0 - 1; i <= i0 + 2; ++i) {
       const double cx = i * w + shift + 0.5 * w;
       const double r = std::hypot(x - cx, (y - cy) * 1.0);
-      // A scale is the half disc below its centre row plus a short cap.
-      if (r > radius || y > cy + 0.25 * h) continue;
+      if (r > radius) continue;
       if (j < best_row) {
         best_row = j;
         best_edge = radius - r;
