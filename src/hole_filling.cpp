@@ -1,49 +1,165 @@
-// Hole filling (ALGORITHM.md step 8), texel by texel as in the paper but
-// without re-searching: a new patch is drawn only into the still-open texels
-// (its key is larger than every older patch's, so the atomic min never lets
-// it take a texel an older patch keeps).
+// Hole filling (ALGORITHM.md step 8) for all of a frame's holes at once, the
+// paper's suggested future work: instead of a patch at the first open texel
+// in scan order (on a hole's rim, so a hole wider than one patch's kept disk
+// takes several), every hole gets a patch at its centre. Rounds: label the
+// open texels into holes (8-connected within a chart), seed each hole at the
+// texel nearest its centroid, plus texel-order seeds 2r apart in holes too big
+// for one patch; keep seeds 2r apart in 3D so that the round's patches cannot
+// overlap (the result does not depend on the order they are made in); create
+// them in parallel, append them in seed order, draw them into the still-open
+// texels (their keys are larger than every older patch's, so they never take
+// a texel an older patch keeps). Repeat until no hole is left.
 #include <algorithm>
+#include <cmath>
+#include <unordered_map>
 #include <unordered_set>
 
 #include "lapflow/parallel.hpp"
 #include "raster_internal.hpp"
 
 namespace lapflow::detail {
+namespace {
+
+SurfacePoint texel_surface_point(const RasterContext& ctx, std::size_t i) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const int32_t F = tm.triangle[i];
+  const Tri& T = ctx.mesh.triangles[F];
+  const double b1 = tm.b1[i], b2 = tm.b2[i];
+  SurfacePoint at;
+  at.position =
+      ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 + ctx.mesh.positions[T[2]] * b2;
+  at.normal = ctx.tri_normal[F];
+  at.triangle = F;
+  return at;
+}
+
+// Seeds at least `spacing` apart in 3D (hash grid of cell `spacing`).
+struct SeedGrid {
+  double cell;
+  std::unordered_map<uint64_t, std::vector<Vec3>> cells;
+  uint64_t key(int64_t x, int64_t y, int64_t z) const { return hash64(uint64_t(x), uint64_t(y), uint64_t(z)); }
+  bool free(const Vec3& p) const {
+    const int64_t cx = int64_t(std::floor(p.x / cell)), cy = int64_t(std::floor(p.y / cell)),
+                  cz = int64_t(std::floor(p.z / cell));
+    for (int64_t z = cz - 1; z <= cz + 1; ++z)
+      for (int64_t y = cy - 1; y <= cy + 1; ++y)
+        for (int64_t x = cx - 1; x <= cx + 1; ++x) {
+          auto it = cells.find(key(x, y, z));
+          if (it == cells.end()) continue;
+          for (const Vec3& q : it->second)
+            if (norm2(q - p) < cell * cell) return false;
+        }
+    return true;
+  }
+  void add(const Vec3& p) {
+    cells[key(int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell)))]
+        .push_back(p);
+  }
+};
+
+}  // namespace
 
 std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
                        std::size_t max_patches) {
   const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
   std::size_t born = 0;
-  // A fluid triangle where create_patch failed once is not retried for each
-  // of its texels (it would fail again: the maker only sees the surface).
+  // A fluid triangle where a seed failed (no patch, or a newborn that does
+  // not keep its own centre) is not seeded again: its texels go to
+  // propagate_keys.
   std::unordered_set<int32_t> failed;
-  RasterCounters counters;
-  for (std::size_t i = 0; i < tm.size() && born < max_patches; ++i) {
-    if (ctx.keys[i] != kNoKey) continue;
-    const int32_t F = tm.triangle[i];
-    if (failed.count(F)) continue;
-    const Tri& T = ctx.mesh.triangles[F];
-    const double b1 = tm.b1[i], b2 = tm.b2[i];
-    SurfacePoint at;
-    at.position = ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 +
-                  ctx.mesh.positions[T[2]] * b2;
-    at.normal = ctx.tri_normal[F];
-    at.triangle = F;
-    std::optional<Patch> patch;
-    if (norm2(at.normal) > 0) patch = make_patch(at, patches.next_id);
-    if (!patch || !patch->alive()) {
-      failed.insert(F);
-      continue;
+  std::vector<int32_t> label;  // per chart texel: hole id this round, -1 none
+  std::vector<uint32_t> open, queue;
+  const double spacing = 2 * ctx.radius;
+  for (int round = 0; born < max_patches; ++round) {
+    open.clear();
+    for (std::size_t i = 0; i < tm.size(); ++i)
+      if (ctx.keys[i] == kNoKey && !failed.count(tm.triangle[i])) open.push_back(uint32_t(i));
+    if (open.empty()) break;
+    if (label.empty()) label.assign(tm.size(), -1);
+    for (uint32_t i : open) label[i] = -2;  // open, not yet labelled
+
+    // Holes in texel order of their first texel; seeds in hole order.
+    std::vector<uint32_t> seeds;
+    SeedGrid grid{spacing, {}};
+    std::vector<uint32_t> members;
+    int32_t holes = 0;
+    for (uint32_t start : open) {
+      if (label[start] != -2) continue;
+      const int chart = ctx.atlas.chart_of_triangle[tm.triangle[start]];
+      members.clear();
+      queue.assign(1, start);
+      label[start] = holes;
+      double sx = 0, sy = 0;
+      for (std::size_t q = 0; q < queue.size(); ++q) {
+        const uint32_t i = queue[q];
+        members.push_back(i);
+        const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+        sx += x, sy += y;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
+            const int32_t n = ctx.index[std::size_t(yy) * N + xx];
+            if (n < 0 || label[n] != -2 || ctx.atlas.chart_of_triangle[tm.triangle[n]] != chart) continue;
+            label[n] = holes;
+            queue.push_back(uint32_t(n));
+          }
+      }
+      ++holes;
+      // The member nearest the centroid (ties: lowest texel index), then, for
+      // holes wider than one patch, members in texel order 2r apart.
+      std::sort(members.begin(), members.end());
+      const double cx = sx / double(members.size()), cy = sy / double(members.size());
+      uint32_t centre = members[0];
+      double best = INFINITY;
+      for (uint32_t i : members) {
+        const double dx = double(tm.texel[i] % uint32_t(N)) - cx, dy = double(tm.texel[i] / uint32_t(N)) - cy;
+        if (dx * dx + dy * dy < best) best = dx * dx + dy * dy, centre = i;
+      }
+      const Vec3 pc = texel_surface_point(ctx, centre).position;
+      if (grid.free(pc)) {
+        grid.add(pc);
+        seeds.push_back(centre);
+      }
+      for (uint32_t i : members) {
+        const Vec3 p = texel_surface_point(ctx, i).position;
+        if (!grid.free(p)) continue;
+        grid.add(p);
+        seeds.push_back(i);
+      }
     }
-    patch->id = patches.next_id++;
-    patch->birth_frame = frame;
-    patches.patches.push_back(std::move(*patch));
-    ++born;
-    rasterize_patch(ctx, patches.patches.back(), patches.patches.size() - 1, counters);
-    // A newborn that does not keep its own seed texel (a maker that breaks
-    // B_V = 1 near the centre) would be followed by one more per texel of the
-    // hole: leave that triangle's texels to propagate_keys instead.
-    if (ctx.keys[i] == kNoKey) failed.insert(F);
+    for (uint32_t i : open) label[i] = -1;
+    if (seeds.size() > max_patches - born) seeds.resize(max_patches - born);
+
+    // Create in parallel (ids in seed order), append in seed order.
+    std::vector<std::optional<Patch>> made(seeds.size());
+    const uint32_t first_id = patches.next_id;
+    parallel_for(seeds.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t k = b; k < e; ++k) {
+        const SurfacePoint at = texel_surface_point(ctx, seeds[k]);
+        if (norm2(at.normal) > 0) made[k] = make_patch(at, first_id + uint32_t(k));
+      }
+    }, 1);
+    patches.next_id = first_id + uint32_t(seeds.size());
+    const std::size_t first_index = patches.patches.size();
+    for (std::size_t k = 0; k < seeds.size(); ++k) {
+      if (!made[k] || !made[k]->alive()) {
+        failed.insert(tm.triangle[seeds[k]]);
+        continue;
+      }
+      made[k]->id = first_id + uint32_t(k);
+      made[k]->birth_frame = frame;
+      patches.patches.push_back(std::move(*made[k]));
+      ++born;
+    }
+    std::vector<RasterCounters> counters(patches.patches.size() - first_index);
+    parallel_for(counters.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t k = b; k < e; ++k)
+        rasterize_patch(ctx, patches.patches[first_index + k], first_index + k, counters[k]);
+    }, 1);
+    for (uint32_t i : seeds)
+      if (ctx.keys[i] == kNoKey) failed.insert(tm.triangle[i]);
   }
   return born;
 }

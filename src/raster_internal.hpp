@@ -66,9 +66,9 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
 bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texel_tri, Vec2 out[3],
                    bool* same_chart = nullptr);
 
-/// Step 8: new patches for uncovered chart texels (texel order), each
-/// rasterized into the still-open texels; then chart texels that are still
-/// open take a covered neighbour's key (documented fallback). Returns patches born.
+/// Step 8: new patches at the centres of the holes (open chart texels,
+/// 8-connected within a chart), in rounds of seeds 2r apart created in
+/// parallel, each drawn into the still-open texels. Returns patches born.
 std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
                        std::size_t max_patches);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same

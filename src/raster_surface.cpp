@@ -9,8 +9,11 @@ namespace lapflow {
 FrameTextures rasterize_atlas(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
                               const RasterOptions& options, const PatchOptions& patch_options,
                               const WeightOptions& weights, int frame, PatchSet& patches) {
+  // Built once per frame: the plain create_patch overload builds it per call,
+  // which made hole filling O(patches x mesh).
+  const SurfaceAdjacency adjacency = build_surface_adjacency(surface.mesh());
   const PatchMaker maker = [&](const SurfacePoint& at, uint32_t id) {
-    return create_patch(surface, at, id, frame, patch_options, weights);
+    return create_patch(surface, adjacency, at, id, frame, patch_options, weights);
   };
   // A vertex whose fluid triangle is unknown is looked up within r / 4 (the
   // advection's projection limit): farther, it is not on this surface.

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <mutex>
 
 #include "lapflow/parallel.hpp"
 #include "lapflow/raster.hpp"
@@ -75,7 +76,14 @@ struct Scene {
   Exemplar ex;
   RasterExemplar rex;
   PatchSet patches;
-  std::vector<std::pair<uint32_t, PatchSpec>> specs;  // id -> spec, in stack order
+  std::vector<std::pair<uint32_t, PatchSpec>> specs;  // id -> spec, in creation order
+  /// (id, spec) in the final stack order (retired patches won nothing, so
+  /// leaving them out does not change any winner).
+  std::vector<std::pair<uint32_t, PatchSpec>> stack() const {
+    std::vector<std::pair<uint32_t, PatchSpec>> out;
+    for (const Patch& p : patches.patches) out.push_back({p.id, spec(p.id)});
+    return out;
+  }
   double r = 0.1;
 
   void add(const PatchSpec& s) {
@@ -90,6 +98,8 @@ struct Scene {
       s.centre = at.position;
       s.r = r, s.half = r, s.m = 8;
       s.angle = 6.283185307179586 * hash_to_unit(hash64(7, id));
+      static std::mutex mu;  // hole filling creates patches in parallel
+      std::lock_guard<std::mutex> lock(mu);
       specs.push_back({id, s});
       return test::make_grid_patch(f, s, id);
     };
@@ -132,10 +142,11 @@ Scene random_scene(bool split, int count, uint64_t seed, int N = 256) {
 void expect_matches_reference(const Scene& sc, const FrameTextures& out, std::size_t* checked_out = nullptr) {
   const Formula formula(sc.ex.feature, 0.1);
   const auto& tm = sc.f.atlas.texels;
+  const auto stack = sc.stack();
   std::size_t checked = 0, mismatches = 0;
   for (std::size_t k = 0; k < tm.size(); ++k) {
     const Vec3 p = sc.f.texel_point(k);
-    const RefWinner ref = reference(sc.f, sc.specs, formula, p);
+    const RefWinner ref = reference(sc.f, stack, formula, p);
     if (ref.ambiguous) continue;
     const int x = int(tm.texel[k] % sc.f.atlas.resolution), y = int(tm.texel[k] / sc.f.atlas.resolution);
     const int got = int(out.aov.at(x, y, 0));

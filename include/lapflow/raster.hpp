@@ -108,15 +108,17 @@ struct FrameTextures {
 };
 
 /// Makes a hole-filling patch at a surface point with the given id (the
-/// frame's create_patch in production, something analytic in tests).
+/// frame's create_patch in production, something analytic in tests). Called
+/// concurrently from several threads: it must be thread-safe.
 using PatchMaker = std::function<std::optional<Patch>(const SurfacePoint& at, uint32_t id)>;
 /// Fluid triangle under a 3D point, -1 when none (for patch vertices whose
 /// surface_triangle is unknown).
 using TriangleLocator = std::function<int(const Vec3& p)>;
 
 /// Steps 7-9 on `mesh` and its atlas. Hole-filling patches come from
-/// `make_patch` (nullptr: no hole filling) and are appended to `patches` with
-/// ids from patches.next_id and birth frame `frame`; retired patches are
+/// `make_patch` (nullptr: no hole filling), one per hole at its centre, in
+/// rounds (docs/raster.md), and are appended to `patches` with ids from
+/// patches.next_id and birth frame `frame`; retired patches are
 /// removed. Patch triangles whose triangle_delta exceeds weights.delta_max are
 /// not drawn (Erosion and Blend modes). Deterministic at any thread count.
 FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
