@@ -13,7 +13,7 @@ namespace {
 
 /// No chart may exceed this share of the surface: a handful of huge charts
 /// leaves large empty corners in the square however they are packed.
-constexpr double kMinChartsForPacking = 16;
+constexpr double kMinChartsForPacking = 32;
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point& t) {
