@@ -449,8 +449,8 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
       // seam could then cross it away from them).
       ct.ring = near || area2 > 4 * std::min({ctx.tri_area2_px[vtri[t[0]]], ctx.tri_area2_px[vtri[t[1]]],
                                               ctx.tri_area2_px[vtri[t[2]]]});
-      bool crosses = tiny && near;
-      if (tiny && !crosses) {
+      bool crosses = false;
+      if (tiny && near) {
         const PatchTriGeometry g = patch_tri_geometry(patch, t);
         crosses = seam_vertex_near(ctx, g.centre, g.radius + g.margin);
       }
