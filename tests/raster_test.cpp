@@ -407,3 +407,55 @@ TEST(Raster, DistortedTrianglesAreNeverDrawn) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+TEST(Raster, AdvectModeNeitherErodesNorRetires) {
+  // Weight 0 everywhere: Erosion mode keeps nothing, Advect mode keeps the
+  // whole uv square, and the hidden duplicate patch is not retired.
+  auto scene = [] {
+    Scene sc;
+    sc.f = test::make_plane(8, 1.0, 128, false);
+    sc.ex = test::ramp_exemplar(32, 0.f);
+    sc.rex = prepared(sc.ex);
+    sc.r = 0.25;
+    PatchSpec a;
+    a.centre = {0.5, 0.5, 0}, a.r = 0.25, a.half = 0.25, a.w0 = 0;
+    sc.add(a);
+    sc.add(a);
+    return sc;
+  };
+  Scene er = scene();
+  RasterOptions o;
+  o.fill_holes = false;
+  const FrameTextures eroded = er.run(o, false);
+  EXPECT_EQ(eroded.stats.covered_texels, 0u);
+  EXPECT_EQ(er.patches.patches.size(), 0u);  // both retired
+
+  Scene ad = scene();
+  o.mode = RasterMode::Advect;
+  const FrameTextures kept = ad.run(o, false);
+  EXPECT_EQ(ad.patches.patches.size(), 2u);
+  EXPECT_EQ(kept.stats.patches_retired, 0u);
+  // The patch's square [0.25, 0.75]^2 of the 1 m plane, 0.9 of a 128 atlas.
+  const double expected = 0.25 * double(kept.stats.chart_texels);
+  EXPECT_NEAR(double(kept.stats.covered_texels), expected, 0.03 * expected);
+  EXPECT_EQ(kept.stats.texels_per_patch[1], 0u);  // the younger copy is hidden everywhere
+}
+
+TEST(Raster, RejectsAnAtlasOfAnotherMeshAndBlendMode) {
+  Scene sc = random_scene(false, 3, 1, 64);
+  SurfaceAtlas wrong = sc.f.atlas;
+  wrong.corner_uv.pop_back();
+  RasterOptions o;
+  o.radius = sc.r;
+  EXPECT_THROW(rasterize_atlas(sc.f.mesh, wrong, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
+               std::invalid_argument);
+  o.mode = RasterMode::Blend;
+  EXPECT_THROW(rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace lapflow
