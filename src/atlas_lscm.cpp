@@ -196,10 +196,18 @@ std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const Triangl
   side.reserve(proper.size());
   for (std::size_t i = 0; i < proj.size(); ++i) side.emplace_back(proj[i].second, i < proj.size() / 2 ? 0 : 1);
   std::sort(side.begin(), side.end());
-  auto find = [&](int32_t t) {
-    auto it = std::lower_bound(side.begin(), side.end(), std::make_pair(t, -1));
-    return (it != side.end() && it->first == t) ? int(it - side.begin()) : -1;
-  };
+  // Triangle -> position in `side`, in a per-thread array reset on exit
+  // (charts are small next to the mesh; a search per lookup was the cost).
+  thread_local std::vector<int32_t> slot;
+  if (slot.size() < info.area.size()) slot.assign(info.area.size(), -1);
+  for (std::size_t i = 0; i < side.size(); ++i) slot[side[i].first] = int32_t(i);
+  struct Reset {
+    const std::vector<std::pair<int32_t, int>>& side;
+    ~Reset() {
+      for (const auto& s : side) slot[s.first] = -1;
+    }
+  } reset{side};
+  auto find = [&](int32_t t) { return int(slot[t]); };
   // A cut through the triangle strips of a fluid mesh is saw-toothed; a few
   // sequential sweeps (in triangle order, so deterministic and free of the
   // oscillation of simultaneous flips) move a triangle with two neighbours
@@ -240,17 +248,20 @@ std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const Triangl
   }
   std::vector<std::vector<int32_t>> out(parts);
   for (std::size_t s = 0; s < side.size(); ++s) out[part[s]].push_back(side[s].first);
+  // Degenerate triangles follow the lowest proper triangle sharing a vertex.
+  std::vector<std::pair<int32_t, int>> vertex_part;  // (vertex, part), first proper triangle wins
+  for (std::size_t s = 0; s < side.size(); ++s)
+    for (int32_t v : mesh.triangles[side[s].first]) vertex_part.emplace_back(v, part[s]);
+  std::stable_sort(vertex_part.begin(), vertex_part.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
   for (int32_t t : tris) {
     if (!info.degenerate[t]) continue;
-    const Tri& f = mesh.triangles[t];
     int target = 0;
-    for (std::size_t s = 0; s < side.size(); ++s) {
-      const Tri& a = mesh.triangles[side[s].first];
-      bool shares = false;
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) shares = shares || a[i] == f[j];
-      if (shares) {
-        target = part[s];
+    for (int32_t v : mesh.triangles[t]) {
+      auto it = std::lower_bound(vertex_part.begin(), vertex_part.end(), std::make_pair(v, INT32_MIN),
+                                 [](const auto& a, const auto& b) { return a.first < b.first; });
+      if (it != vertex_part.end() && it->first == v) {
+        target = it->second;
         break;
       }
     }
@@ -281,11 +292,17 @@ std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, 
         ok[i] = area <= max_chart_area && flatten_one(mesh, info, lists[pending[i]], max_stretch, false, corner_uv);
       }
     }, 1);
+    // Splits are computed in parallel, ids handed out in chart order.
+    std::vector<std::vector<std::vector<int32_t>>> split(pending.size());
+    parallel_for(pending.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i)
+        if (!ok[i]) split[i] = split_chart(mesh, info, lists[pending[i]]);
+    }, 1);
     std::vector<int32_t> next;
     for (std::size_t i = 0; i < pending.size(); ++i) {
       if (ok[i]) continue;
       const int32_t c = pending[i];
-      auto parts = split_chart(mesh, info, lists[c]);
+      auto& parts = split[i];
       if (parts.size() < 2 || round >= 64) {
         // A single proper triangle always flattens exactly; this keeps the
         // loop finite on pathological input by accepting the best we have.
