@@ -8,8 +8,16 @@ VelocityField vertex_velocity_field(const SurfaceQuery& query) {
   // A mesh without velocities (or without triangles) moves nothing; the
   // caller decides whether that is acceptable (--allow-zero-velocity).
   if (!mesh.has_velocities() || mesh.empty()) return [](const Vec3&) { return Vec3{}; };
-  return [&query, &mesh](const Vec3& p) {
-    const ClosestHit hit = query.closest(p, INFINITY);
+  // Embree's point query only culls by its radius: an unbounded query visits
+  // many far triangles before the radius shrinks. Points sampled here are
+  // near the surface (a patch vertex moved by a fraction of a frame), so try
+  // a radius of a few edges first and widen only when nothing is that close.
+  double edges = 0;
+  for (const Tri& f : mesh.triangles) edges += norm(mesh.positions[f[1]] - mesh.positions[f[0]]);
+  const double near = 8 * edges / double(mesh.triangles.size()) + 1e-9 * norm(bounding_box(mesh).size());
+  return [&query, &mesh, near](const Vec3& p) {
+    ClosestHit hit = query.closest(p, near);
+    if (!hit.found) hit = query.closest(p, INFINITY);
     if (!hit.found) return Vec3{};
     const Tri& f = mesh.triangles[hit.triangle];
     const double b0 = 1.0 - hit.b1 - hit.b2;

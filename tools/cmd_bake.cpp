@@ -146,8 +146,8 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
-                 "erosion (the paper), blend (alpha-blend every covering patch: ghosts), advect (no erosion)")
-      ->check(CLI::IsMember({"erosion", "blend", "advect"}))
+                 "erosion (the paper) or advect (no erosion, no retirement: a purely advected texture that stretches)")
+      ->check(CLI::IsMember({"erosion", "advect"}))
       ->capture_default_str()
       ->group("Erosion");
   cmd.add_option("--resolution", o.atlas.resolution, "Atlas width = height in texels (0 = from the exemplar's density)")
