@@ -248,7 +248,7 @@ TEST(DemoCommand, WritesTheSequenceAndASummary) {
   const std::string out = scratch / "seq";
   std::string stdout_text, stderr_text;
   const int code = test::run_command(std::string(LAPFLOW_BINARY) + " demo --out '" + out +
-                                         "' --frames 3 --resolution 40 --case slab --name s --threads 1",
+                                         "' --frames 3 --resolution 40 --case slab --name s --threads 1 --atlas-resolution 128",
                                      &stdout_text, &stderr_text, scratch);
   EXPECT_EQ(code, 0) << stderr_text;
   for (int f = 1; f <= 3; ++f) EXPECT_TRUE(std::filesystem::exists(demo_frame_path(out, "s", f))) << f;

@@ -9,6 +9,7 @@
 #include <functional>
 #include <string>
 
+#include "lapflow/pipeline.hpp"
 #include "lapflow/vec.hpp"
 
 namespace lapflow::cli {
@@ -68,6 +69,9 @@ std::string default_output_name(const std::string& mesh_pattern);
 bool parse_orientation(const std::string& text, lapflow::Vec3& direction);
 /// "2" or "all (2)".
 std::string thread_count_label();
+
+/// Resolves automatic options, bakes with a progress bar, prints a summary.
+void bake_with_progress(lapflow::BakeOptions& options);
 
 /// Each command file adds its subcommand with one of these.
 void add_inspect_command(CLI::App& app);

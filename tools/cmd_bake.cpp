@@ -8,6 +8,27 @@
 #include "lapflow/pipeline.hpp"
 
 namespace lapflow::cli {
+
+void bake_with_progress(BakeOptions& o) {
+  resolve_bake_options(o);
+
+  const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
+  info("lapflow bake: {} frames {}-{} of {}", frames.size(), frames.front(), frames.back(), o.mesh_pattern);
+  info("  exemplar {} | radius {:.4g} m | atlas {}x{} | seed {} | {} threads", o.exemplar_color, o.patch.radius,
+       o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
+  Progress progress("bake", frames.size());
+  double seconds = 0;
+  bake(o, [&](const FrameStats& s) {
+    seconds += s.seconds_total;
+    progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
+                              s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
+                              100 * s.coverage, s.seconds_total));
+  });
+  progress.finish();
+  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", frames.size(), seconds,
+       seconds / double(frames.size()), peak_rss_mb(), o.out_dir);
+}
+
 namespace {
 
 struct BakeCli {
@@ -33,23 +54,7 @@ void run_bake(BakeCli& c) {
   static const std::map<std::string, RasterMode> modes{
       {"erosion", RasterMode::Erosion}, {"blend", RasterMode::Blend}, {"advect", RasterMode::Advect}};
   o.raster.mode = modes.at(c.mode);
-  resolve_bake_options(o);
-
-  const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
-  info("lapflow bake: {} frames {}-{} of {}", frames.size(), frames.front(), frames.back(), o.mesh_pattern);
-  info("  exemplar {} | radius {:.4g} m | atlas {}x{} | seed {} | {} threads", o.exemplar_color, o.patch.radius,
-       o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
-  Progress progress("bake", frames.size());
-  double seconds = 0;
-  bake(o, [&](const FrameStats& s) {
-    seconds += s.seconds_total;
-    progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
-                              s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
-                              100 * s.coverage, s.seconds_total));
-  });
-  progress.finish();
-  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", frames.size(), seconds,
-       seconds / double(frames.size()), peak_rss_mb(), o.out_dir);
+  bake_with_progress(o);
 }
 
 }  // namespace

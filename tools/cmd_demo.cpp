@@ -20,6 +20,10 @@ struct DemoCommandOptions {
   double triangles = 0;
   double fps = 24;
   double period = 2;
+  bool bake = true;
+  std::string exemplar = "pebbles";
+  int atlas_resolution = 2048;
+  double radius = 0.03;
 };
 
 DemoOptions to_demo_options(const DemoCommandOptions& o) {
@@ -52,13 +56,26 @@ void run_demo(const DemoCommandOptions& o) {
   info("wrote {} frames: {}", s.frames, (std::filesystem::path(o.out) / (o.name + ".%04d.ply")).string());
   info("triangles per frame: min {}, mean {:.0f}, max {}; {:.1f} s ({:.2f} s per frame)", s.triangles_min,
        s.triangles_mean, s.triangles_max, s.seconds, s.seconds / s.frames);
+  if (!o.bake) return;
+  // The main job: bake the sequence just written, as `lapflow bake` would.
+  BakeOptions b;
+  b.mesh_pattern = (std::filesystem::path(o.out) / (o.name + ".%04d.ply")).string();
+  b.exemplar_color = o.exemplar;
+  resolve_exemplar_paths(b.exemplar_color, b.exemplar_feature, b.exemplar_displacement);
+  b.out_dir = (std::filesystem::path(o.out) / "bake").string();
+  b.name = o.name;
+  b.fps = o.fps;
+  b.seed = globals().seed;
+  b.patch.radius = o.radius;
+  b.atlas.resolution = o.atlas_resolution;
+  bake_with_progress(b);
 }
 
 }  // namespace
 
 void add_demo_command(CLI::App& app) {
   static DemoCommandOptions o;
-  auto* cmd = app.add_subcommand("demo", "Write the built-in demo scene: a liquid-like sequence with velocities");
+  auto* cmd = app.add_subcommand("demo", "Write the built-in demo scene (a liquid-like sequence with velocities) and bake it");
   cmd->description(
       "Writes a liquid-like surface sequence that needs no input data, re-meshed from its level set every frame\n"
       "(a new mesh each frame, like a real simulation), with exact per-vertex velocities.\n"
@@ -100,12 +117,23 @@ void add_demo_command(CLI::App& app) {
                                         "deforms more)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_flag("!--no-bake", o.bake, "Only write the PLY sequence; do not bake it");
+  cmd->add_option("--exemplar", o.exemplar, "Exemplar for the bake: a shipped name or NAME.color.png")
+      ->capture_default_str();
+  cmd->add_option("--atlas-resolution", o.atlas_resolution, "Atlas width = height of the bake, in texels")
+      ->check(CLI::Range(64, 16384))
+      ->capture_default_str();
+  cmd->add_option("--radius", o.radius, "Patch radius r of the bake in metres (0 = about 1500 patches)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   add_global_options(*cmd);
   cmd->footer(
       "OUTPUT\n"
       "  OUT/NAME.%04d.ply, frames 1..N: binary little-endian PLY, float x y z vx vy vz (metres, m/s), faces as\n"
       "  uchar/int lists, counter-clockwise seen from outside. Each file is written to a temporary name and\n"
       "  renamed. A summary (frames, triangles min/mean/max, seconds) goes to stderr.\n"
+      "  Then, unless --no-bake, the sequence is baked into OUT/bake/ exactly as 'lapflow bake' does (see its\n"
+      "  help for the files): NAME.N.obj/.mtl, NAME.color.N.exr, NAME.disp.N.exr, NAME.stats.jsonl.\n"
       "\n"
       "EXIT CODES\n"
       "  0 ok, 2 bad usage, 1 internal or write error\n"
