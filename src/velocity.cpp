@@ -14,9 +14,10 @@ VelocityField vertex_velocity_field(const SurfaceQuery& query) {
   // a radius of a few edges first and widen only when nothing is that close.
   double edges = 0;
   for (const Tri& f : mesh.triangles) edges += norm(mesh.positions[f[1]] - mesh.positions[f[0]]);
-  const double near = 8 * edges / double(mesh.triangles.size()) + 1e-9 * norm(bounding_box(mesh).size());
+  const double near = 2 * edges / double(mesh.triangles.size()) + 1e-9 * norm(bounding_box(mesh).size());
   return [&query, &mesh, near](const Vec3& p) {
     ClosestHit hit = query.closest(p, near);
+    if (!hit.found) hit = query.closest(p, 8 * near);
     if (!hit.found) hit = query.closest(p, INFINITY);
     if (!hit.found) return Vec3{};
     const Tri& f = mesh.triangles[hit.triangle];
