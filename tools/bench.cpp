@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -144,6 +145,7 @@ int main(int argc, char** argv) {
   bench::bench_raster({2048, 4096, 6144});
   fmt::print("\nBake, mean per frame over frames 2-6 (frame 1 seeds):\n\n");
   header();
+  std::fflush(stdout);  // the bakes below print from child processes
   for (int n : {2048, 4096, 6144})
     if (std::system(fmt::format("'{}' bake-demo {}", self, n).c_str()) != 0) return 1;
   if (fs::exists(data + "/dam_break/dam_break.0020.ply"))

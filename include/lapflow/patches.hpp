@@ -70,8 +70,11 @@ struct SeedOptions {
 struct AdvectOptions {
   double dt = 1.0 / 24;            ///< seconds between frames
   /// Sub-steps so that |v| * h <= fraction * r: a step never jumps farther
-  /// than one patch radius between two velocity samples.
-  double max_step_fraction = 1.0;
+  /// than a few patch radii between two velocity samples. Accuracy is kept
+  /// by the turn rule below; this one only bounds how far from both surfaces
+  /// a velocity is sampled. 4 rather than 1: on the 100k-triangle demo with
+  /// 5k patches it cut advection by 40% with every patch test unchanged.
+  double max_step_fraction = 4.0;
   /// Sub-steps so that the velocity turns by at most this angle (radians)
   /// per step: RK2's error grows with the cube of the turn (vortices), not
   /// with the speed (a fast translation is integrated exactly in one step).
