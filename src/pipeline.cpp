@@ -95,6 +95,7 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"utilization", s.utilization},
           {"chart_texels", s.chart_texels},
           {"coverage", s.coverage},
+          {"forced_texels", s.forced_texels},
           {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"seed", s.seconds_seed},
                        {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster}, {"write", s.seconds_write},
                        {"total", s.seconds_total}}},
@@ -204,6 +205,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
     st.patches_retired = tex.stats.patches_retired;
     st.patches_alive = patches.patches.size();
     st.chart_texels = tex.stats.chart_texels;
+    st.forced_texels = tex.stats.forced_texels;
     st.coverage = tex.stats.chart_texels ? double(tex.stats.covered_texels) / double(tex.stats.chart_texels) : 1.0;
 
     // Step 10: write the frame, every file atomically.

@@ -50,7 +50,8 @@ struct FrameStats {
   int charts = 0;
   double utilization = 0;
   std::size_t chart_texels = 0;
-  double coverage = 0;                    ///< covered chart texels / chart texels
+  double coverage = 0;                    ///< chart texels a patch kept / chart texels
+  std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
   double seconds_read = 0, seconds_advect = 0, seconds_seed = 0, seconds_atlas = 0, seconds_raster = 0,
          seconds_write = 0, seconds_total = 0;
   double peak_rss_mb = 0;
