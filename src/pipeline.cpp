@@ -63,6 +63,11 @@ std::unique_ptr<SurfaceFrame> load_frame(const BakeOptions& o, const FramePatter
   } else if (s->mesh.has_velocities()) {
     s->velocity = vertex_velocity_field(*s->query);
     s->velocity_source = "vertex";
+    if (o.velocity_band > 0) {
+      s->velocity = banded_velocity_field(std::move(s->velocity), s->mesh, o.velocity_voxel * mean_edge_length(s->mesh),
+                                          o.velocity_band);
+      s->velocity_source = "vertex (band of " + std::to_string(o.velocity_band) + " voxels)";
+    }
   } else if (s->mesh.empty() || o.allow_zero_velocity) {
     s->velocity = [](const Vec3&) { return Vec3{}; };
     s->velocity_source = "zero";

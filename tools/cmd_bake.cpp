@@ -104,6 +104,16 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->group("Input");
   cmd.add_flag("--allow-zero-velocity", o.allow_zero_velocity, "Accept meshes without velocity (a still texture)")
       ->group("Input");
+  cmd.add_option("--velocity-band", o.velocity_band,
+                 "Per-vertex velocity is sampled once per frame on voxels within N voxels of the surface and read "
+                 "trilinearly; 0 = exact closest-point sampling everywhere (slower)")
+      ->check(CLI::Range(0, 16))
+      ->capture_default_str()
+      ->group("Input");
+  cmd.add_option("--velocity-voxel", o.velocity_voxel, "Voxel size of that band, in mean edge lengths of the frame's mesh")
+      ->check(CLI::Range(0.25, 16.0))
+      ->capture_default_str()
+      ->group("Input");
   cmd.add_option("--exemplar", o.exemplar_color,
                  "Colour exemplar (PNG/JPEG/TIFF/EXR), or the name of a shipped exemplar (pebbles, lava, squares, "
                  "scales, foam)")

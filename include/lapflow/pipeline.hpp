@@ -24,6 +24,12 @@ struct BakeOptions {
   double fps = 24;                        ///< dt = 1/fps seconds
   double min_speed = 0;                   ///< m/s: slower velocities count as zero
   bool allow_zero_velocity = false;       ///< accept a sequence with no velocity
+  /// Per-vertex velocities are sampled once per frame on voxels of
+  /// `velocity_voxel` mean edge lengths within `velocity_band` voxels of the
+  /// surface, then read trilinearly (band 0 = an exact closest-point query
+  /// for every sample).
+  int velocity_band = 6;
+  double velocity_voxel = 2.0;
   std::string exemplar_color, exemplar_feature, exemplar_displacement;
   // Outputs
   std::string out_dir;

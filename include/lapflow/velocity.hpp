@@ -20,6 +20,16 @@ VelocityField vertex_velocity_field(const SurfaceQuery& query);
 /// liquid at rest, which would make a texture creep.
 VelocityField with_min_speed(VelocityField field, double min_speed);
 
+/// `exact` sampled once on the voxels (size `voxel_size`, metres) within
+/// `band_voxels` of the mesh's vertices and read back trilinearly; points
+/// whose 8 voxels are not all in the band use `exact`. Velocities are stored
+/// in float. Advection samples velocities millions of times a frame: this
+/// trades one exact sample per band voxel for cheap lookups.
+VelocityField banded_velocity_field(VelocityField exact, const TriMesh& mesh, double voxel_size, int band_voxels);
+
+/// Mean edge length of the mesh's triangles (metres; 0 for an empty mesh).
+double mean_edge_length(const TriMesh& mesh);
+
 /// A vector grid read from an OpenVDB file, sampled trilinearly in world space.
 class VelocityGrid {
  public:
