@@ -12,9 +12,7 @@ VelocityField vertex_velocity_field(const SurfaceQuery& query) {
   // many far triangles before the radius shrinks. Points sampled here are
   // near the surface (a patch vertex moved by a fraction of a frame), so try
   // a radius of a few edges first and widen only when nothing is that close.
-  double edges = 0;
-  for (const Tri& f : mesh.triangles) edges += norm(mesh.positions[f[1]] - mesh.positions[f[0]]);
-  const double near = 2 * edges / double(mesh.triangles.size()) + 1e-9 * norm(bounding_box(mesh).size());
+  const double near = 2 * mean_edge_length(mesh) + 1e-9 * norm(bounding_box(mesh).size());
   return [&query, &mesh, near](const Vec3& p) {
     ClosestHit hit = query.closest(p, near);
     if (!hit.found) hit = query.closest(p, 8 * near);
