@@ -557,13 +557,7 @@ void write_ply(const std::string& path, const TriMesh& m) {
     put(uint8_t(3));
     put(t[0]), put(t[1]), put(t[2]);
   }
-  write_atomically(path, [&](const std::string& tmp) {
-    std::ofstream f(tmp, std::ios::binary);
-    if (!f) throw OutputError(path + ": cannot open for writing");
-    f.write(out.data(), std::streamsize(out.size()));
-    f.close();
-    if (!f) throw OutputError(path + ": write failed (disk full?)");
-  });
+  write_text_atomically(path, out);  // binary-safe: writes the bytes as they are
 }
 
 }  // namespace lapflow
