@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lapflow/atomic_file.hpp"
+#include "lapflow/bake_manifest.hpp"
 #include "lapflow/errors.hpp"
 #include "lapflow/mesh_io.hpp"
 #include "lapflow/surface_query.hpp"
@@ -162,6 +163,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   std::unique_ptr<SurfaceFrame> prev;
   std::string stats_text;
   const std::string stats_path = (fs::path(o.out_dir) / (o.name + ".stats.jsonl")).string();
+  write_bake_manifest(make_bake_manifest(o, frames), bake_manifest_path(o.out_dir, o.name));
 
   for (const int f : frames) {
     FrameStats st;

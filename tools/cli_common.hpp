@@ -79,5 +79,8 @@ void add_demo_command(CLI::App& app);
 void add_atlas_command(CLI::App& app);
 void add_patches_command(CLI::App& app);
 void add_bake_command(CLI::App& app);
+void add_eval_command(CLI::App& app);
+void add_preview_command(CLI::App& app);
+void add_feature_map_command(CLI::App& app);
 
 }  // namespace lapflow::cli

@@ -5,6 +5,7 @@
 
 #include "cli_common.hpp"
 #include "lapflow/errors.hpp"
+#include "lapflow/bake_manifest.hpp"
 #include "lapflow/pipeline.hpp"
 
 namespace lapflow::cli {
@@ -51,9 +52,7 @@ void run_bake(BakeCli& c) {
       {"piz", ExrCompression::Piz}, {"zip", ExrCompression::Zip}, {"dwaa", ExrCompression::Dwaa},
       {"none", ExrCompression::None}};
   o.exr.compression = compressions.at(c.compression);
-  static const std::map<std::string, RasterMode> modes{
-      {"erosion", RasterMode::Erosion}, {"blend", RasterMode::Blend}, {"advect", RasterMode::Advect}};
-  o.raster.mode = modes.at(c.mode);
+  o.raster.mode = parse_raster_mode(c.mode);
   bake_with_progress(o);
 }
 

@@ -29,6 +29,9 @@ int main(int argc, char** argv) {
   cli::add_atlas_command(app);
   cli::add_patches_command(app);
   cli::add_bake_command(app);
+  cli::add_eval_command(app);
+  cli::add_preview_command(app);
+  cli::add_feature_map_command(app);
   try {
     // `lapflow bake scene.toml [options]`: the file's keys become options
     // placed before the user's, so the command line overrides the file.

@@ -1,0 +1,52 @@
+#pragma once
+/// \file bake_manifest.hpp NAME.bake.json: what a bake was made from, written
+/// atomically when the bake starts, so that `lapflow eval` and
+/// `lapflow preview` can find the inputs and the per-frame files of a bake
+/// folder without being told again.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/pipeline.hpp"
+
+namespace lapflow {
+
+struct BakeManifest {
+  int version = 1;
+  std::string name;                  ///< NAME: outputs are NAME.color.N.exr, ...
+  std::string dir;                   ///< the folder holding the manifest (filled by read_bake_manifest)
+  std::string mesh_pattern;          ///< absolute input mesh pattern
+  std::string velocity_vdb_pattern;  ///< absolute, empty for per-vertex velocities
+  std::string velocity_grid;
+  std::vector<int> frames;           ///< every frame the bake was asked for, in order
+  double fps = 24, min_speed = 0;
+  bool allow_zero_velocity = false;
+  std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< absolute
+  std::string mode = "erosion";      ///< erosion | blend | advect
+  double radius = 0, epsilon = 0, delta_max = 0;
+  int resolution = 0;
+  uint64_t seed = 0;
+  bool aov = false, dump_patches = false;
+
+  /// Path of frame `frame`'s file of the given kind: "obj", "mtl", "color",
+  /// "disp", "aov", "patches".
+  std::string frame_file(const std::string& kind, int frame) const;
+};
+
+/// Path of NAME.bake.json in `dir`.
+std::string bake_manifest_path(const std::string& dir, const std::string& name);
+
+/// The manifest of a resolved bake (resolve_bake_options already ran).
+BakeManifest make_bake_manifest(const BakeOptions& options, const std::vector<int>& frames);
+void write_bake_manifest(const BakeManifest& manifest, const std::string& path);
+
+/// Reads `path`, or the single *.bake.json in `path` when it is a folder
+/// (`name` picks one when there are several). Throws InputError naming the
+/// file and what is wrong.
+BakeManifest read_bake_manifest(const std::string& path, const std::string& name = "");
+
+/// The name of a RasterMode as the command line spells it, and back (throws UsageError).
+std::string raster_mode_name(RasterMode mode);
+RasterMode parse_raster_mode(const std::string& name);
+
+}  // namespace lapflow

@@ -1,0 +1,1 @@
+// eval: being written (issue 6).

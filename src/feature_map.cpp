@@ -1,0 +1,1 @@
+// feature_map: being written (issue 6).

@@ -1,0 +1,1 @@
+// raster_blend: being written (issue 6).

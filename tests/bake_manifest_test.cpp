@@ -1,0 +1,65 @@
+// NAME.bake.json round trip and its errors.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/bake_manifest.hpp"
+#include "lapflow/errors.hpp"
+
+namespace lapflow {
+namespace {
+
+TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
+  test::TempDir dir("manifest");
+  BakeOptions o;
+  o.name = "shot";
+  o.out_dir = dir.str();
+  o.mesh_pattern = "sim/fluid.%04d.ply";
+  o.exemplar_color = "pebbles.color.png";
+  o.raster.mode = RasterMode::Advect;
+  o.patch.radius = 0.04;
+  o.atlas.resolution = 2048;
+  o.seed = 7;
+  o.aov = true;
+  const BakeManifest m = make_bake_manifest(o, {3, 4, 5});
+  EXPECT_TRUE(std::filesystem::path(m.mesh_pattern).is_absolute());
+  write_bake_manifest(m, bake_manifest_path(dir.str(), "shot"));
+
+  // Read from the folder (the only manifest there) and from the file.
+  for (const std::string& where : {dir.str(), bake_manifest_path(dir.str(), "shot")}) {
+    const BakeManifest r = read_bake_manifest(where);
+    EXPECT_EQ(r.name, "shot");
+    EXPECT_EQ(r.frames, (std::vector<int>{3, 4, 5}));
+    EXPECT_EQ(r.mode, "advect");
+    EXPECT_EQ(r.mesh_pattern, m.mesh_pattern);
+    EXPECT_DOUBLE_EQ(r.radius, 0.04);
+    EXPECT_EQ(r.resolution, 2048);
+    EXPECT_EQ(r.seed, 7u);
+    EXPECT_TRUE(r.aov);
+    EXPECT_EQ(r.frame_file("color", 4), dir / "shot.color.0004.exr");
+    EXPECT_EQ(r.frame_file("obj", 12), dir / "shot.0012.obj");
+    EXPECT_EQ(r.frame_file("patches", 5), dir / "shot.patches.0005.ply");
+  }
+  EXPECT_EQ(parse_raster_mode(raster_mode_name(RasterMode::Blend)), RasterMode::Blend);
+  EXPECT_THROW(parse_raster_mode("fade"), UsageError);
+}
+
+TEST(BakeManifest, ErrorsNameTheFile) {
+  test::TempDir dir("manifest_bad");
+  EXPECT_THROW(read_bake_manifest(dir.str()), InputError);  // no manifest at all
+  test::write_bytes(dir / "a.bake.json", "{\"lapflow_bake\": 1, \"name\": \"a\", \"frames\": [1, ");
+  try {
+    read_bake_manifest(dir / "a.bake.json");
+    FAIL() << "truncated JSON accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("a.bake.json"), std::string::npos) << e.what();
+  }
+  test::write_bytes(dir / "b.bake.json", "{\"name\": \"b\"}");
+  EXPECT_THROW(read_bake_manifest(dir / "b.bake.json"), InputError);  // not ours
+  EXPECT_THROW(read_bake_manifest(dir.str()), InputError);           // two manifests: ambiguous
+  EXPECT_THROW(read_bake_manifest(dir.str(), "c"), InputError);      // named one missing
+}
+
+}  // namespace
+}  // namespace lapflow
