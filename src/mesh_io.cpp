@@ -443,10 +443,14 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
 
 // ------------------------------------------------------------------ OBJ ----
 
-TriMesh read_obj(const std::string& path, const std::string& data) {
+// With `corner_uv`, also the texture coordinates: 3 per triangle (the `vt`
+// of each corner), or none when the file has no `vt`.
+TriMesh read_obj(const std::string& path, const std::string& data, std::vector<Vec2>* corner_uv = nullptr) {
   TriMesh m;
   std::vector<int32_t> line_of_triangle;  // to name the line when an index is bad
-  std::vector<int64_t> poly;
+  std::vector<int64_t> poly, poly_vt;
+  std::vector<Vec2> vts;
+  bool any_missing_vt = false;
   std::size_t pos = 0;
   int line_no = 0;
   while (pos < data.size()) {
@@ -470,10 +474,40 @@ TriMesh read_obj(const std::string& path, const std::string& data) {
       if (!is_finite(p))
         throw bad("vertex " + std::to_string(m.positions.size()) + ": position is " + non_finite_word(p));
       m.positions.push_back(p);
+    } else if (w[0] == "vt" && corner_uv) {
+      double c[2];
+      if (w.size() < 3) throw bad("malformed texture coordinate: expected 'vt u v'");
+      for (int k = 0; k < 2; ++k)
+        if (!parse_double(w[1 + k], c[k]) || !std::isfinite(c[k]))
+          throw bad("malformed texture coordinate: '" + std::string(w[1 + k]) + "' is not a finite number");
+      vts.push_back({c[0], c[1]});
     } else if (w[0] == "f") {
       if (w.size() < 4) throw bad("malformed face: a face needs at least 3 vertices");
       poly.clear();
+      poly_vt.clear();
       for (std::size_t k = 1; k < w.size(); ++k) {
+        if (corner_uv) {
+          // v/vt or v/vt/vn: the texture coordinate index, when present.
+          const std::size_t slash = w[k].find('/');
+          int64_t t = 0;
+          if (slash != std::string_view::npos) {
+            const std::string_view tok = w[k].substr(slash + 1, w[k].find('/', slash + 1) - slash - 1);
+            if (!tok.empty()) {
+              const auto r = std::from_chars(tok.data(), tok.data() + tok.size(), t);
+              if (r.ec != std::errc() || r.ptr != tok.data() + tok.size() || t == 0)
+                throw bad("malformed face: '" + std::string(w[k]) + "' has a bad texture coordinate index");
+              t = t > 0 ? t - 1 : int64_t(vts.size()) + t;
+              if (t < 0 || t >= int64_t(vts.size()))
+                throw bad("texture coordinate index in '" + std::string(w[k]) + "' is out of range (" +
+                          std::to_string(vts.size()) + " defined so far)");
+              poly_vt.push_back(t);
+            } else {
+              any_missing_vt = true;
+            }
+          } else {
+            any_missing_vt = true;
+          }
+        }
         const std::string_view tok = w[k].substr(0, w[k].find('/'));
         int64_t idx = 0;
         const auto r = std::from_chars(tok.data(), tok.data() + tok.size(), idx);
@@ -490,6 +524,8 @@ TriMesh read_obj(const std::string& path, const std::string& data) {
       for (std::size_t j = 1; j + 1 < poly.size(); ++j) {
         m.triangles.push_back({int32_t(poly[0]), int32_t(poly[j]), int32_t(poly[j + 1])});
         line_of_triangle.push_back(line_no);
+        if (corner_uv && poly_vt.size() == poly.size())
+          for (const std::size_t k : {std::size_t(0), j, j + 1}) corner_uv->push_back(vts[poly_vt[k]]);
       }
     } else {
       // vt, vn, o, g, s, usemtl, mtllib, l, p and the free-form statements
@@ -507,10 +543,23 @@ TriMesh read_obj(const std::string& path, const std::string& data) {
         throw InputError(path, "line " + std::to_string(line_of_triangle[t]) + ": vertex index " +
                                    std::to_string(int64_t(x) + 1) + " is out of range (the file has " +
                                    std::to_string(nv) + " vertices)");
+  if (corner_uv) {
+    if (any_missing_vt && !corner_uv->empty())
+      throw InputError(path, "some faces have texture coordinates and some do not");
+    if (corner_uv->size() != 3 * m.triangles.size()) corner_uv->clear();
+  }
   return m;
 }
 
 }  // namespace
+
+UvMesh read_uv_mesh(const std::string& path) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext != ".obj") throw InputError(path, "a UV mesh must be an OBJ file (lapflow writes NAME.N.obj)");
+  UvMesh out;
+  out.mesh = read_obj(path, load_file(path), &out.corner_uv);
+  return out;
+}
 
 TriMesh read_mesh(const std::string& path) {
   const std::string ext = lower(fs::path(path).extension().string());

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "lapflow/atlas.hpp"
+#include "lapflow/errors.hpp"
 #include "lapflow/mesh_io.hpp"
 #include "lapflow/uv_mesh.hpp"
 #include "test_helpers.hpp"
@@ -30,6 +31,35 @@ std::string slurp(const fs::path& p) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+TEST(UvMeshObj, ReadUvMeshGivesBackTheWrittenCorners) {
+  const TriMesh m = test::icosphere(2, 0.5);
+  AtlasOptions o;
+  o.resolution = 256;
+  const SurfaceAtlas a = build_surface_atlas(m, o);
+  const fs::path dir = temp_dir("readback");
+  write_uv_mesh_obj((dir / "f.0001.obj").string(), m, a, {});
+  const UvMesh r = read_uv_mesh((dir / "f.0001.obj").string());
+  ASSERT_EQ(r.mesh.triangles.size(), m.triangles.size());
+  ASSERT_EQ(r.corner_uv.size(), a.corner_uv.size());
+  for (std::size_t t = 0; t < m.triangles.size(); ++t) EXPECT_EQ(r.mesh.triangles[t], m.triangles[t]);
+  for (std::size_t c = 0; c < a.corner_uv.size(); ++c) {
+    EXPECT_NEAR(r.corner_uv[c].x, a.corner_uv[c].x, 1e-6);
+    EXPECT_NEAR(r.corner_uv[c].y, a.corner_uv[c].y, 1e-6);
+  }
+  // Faces with and without vt in one file, and a vt index past the end, are errors naming the file.
+  std::ofstream(dir / "mixed.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\nf 1 2 3\n";
+  std::ofstream(dir / "range.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/3\n";
+  for (const char* bad : {"mixed.obj", "range.obj"}) {
+    try {
+      read_uv_mesh((dir / bad).string());
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+    }
+  }
+  fs::remove_all(dir);
 }
 
 TEST(UvMeshObj, EveryCornerKeepsItsSourceVertexAndAtlasUv) {

@@ -8,6 +8,17 @@
 
 namespace lapflow {
 
+/// A mesh with texture coordinates per triangle corner (a baked NAME.N.obj).
+struct UvMesh {
+  TriMesh mesh;
+  std::vector<Vec2> corner_uv;  ///< 3 per triangle (corner order), empty when the file has no `vt`
+};
+
+/// Reads an OBJ with its `vt` coordinates (f v/vt or v/vt/vn). Throws
+/// InputError naming the file and line on malformed input, and when only some
+/// faces have texture coordinates.
+UvMesh read_uv_mesh(const std::string& path);
+
 /// Reads one PLY (binary little/big endian or ASCII) or OBJ file. Polygons are
 /// triangulated (fan). Per-vertex velocity is read from PLY properties
 /// `vx vy vz`, `velocity_x/_y/_z` or `v_x/_y/_z` (float or double).
