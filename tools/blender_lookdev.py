@@ -1,0 +1,354 @@
+"""Render a lapflow bake in Blender (Cycles, headless).
+
+    blender -b -P tools/blender_lookdev.py -- --bake DIR [--frames 1,10,20 | A-B]
+        [--out DIR] [--samples N] [--resolution WxH] [--displacement-scale S]
+        [--displacement bump|true|none] [--camera auto|x,y,z] [--target x,y,z]
+
+For every chosen frame N it loads DIR/NAME.NNNN.obj (the fluid mesh with the
+atlas UVs), puts DIR/NAME.color.NNNN.exr on it as base colour and
+DIR/NAME.disp.NNNN.exr as bump (or true displacement), lights it with a sun and
+a sky, frames a camera on the bounding box of all chosen frames (the same
+camera for every frame) and renders OUT/NAME.NNNN.png with Cycles.
+NAME, the frame list and the patch radius come from DIR/NAME.bake.json, which
+every `lapflow bake` writes.
+
+Exit codes: 0 ok, 2 bad input (missing bake, missing frame files, bad option).
+Works with Debian's Blender 3.4 (no OpenImageDenoise: denoising is off; use
+more samples for a cleaner picture).
+"""
+
+import argparse
+import glob
+import json
+import math
+import os
+import sys
+
+import bpy
+from mathutils import Vector
+
+
+class BadInput(Exception):
+    pass
+
+
+def script_args():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    p = argparse.ArgumentParser(prog="blender -b -P tools/blender_lookdev.py --",
+                                description="Render frames of a lapflow bake with Cycles.")
+    p.add_argument("--bake", required=True, help="bake output folder (holds NAME.bake.json)")
+    p.add_argument("--name", default="", help="which bake when the folder holds several")
+    p.add_argument("--frames", default="", help="frames: 1,10,20 or A-B or a mix (default: the first baked frame)")
+    p.add_argument("--out", default="", help="output folder for the PNGs (default: BAKE/lookdev)")
+    p.add_argument("--samples", type=int, default=64, help="Cycles samples per pixel (no denoiser here)")
+    p.add_argument("--resolution", default="1280x720", help="WxH in pixels")
+    p.add_argument("--displacement", choices=["bump", "true", "none"], default="bump",
+                   help="how the displacement atlas is used (true = subdivided real displacement, slower)")
+    p.add_argument("--displacement-scale", type=float, default=-1.0,
+                   help="height of displacement value 1, in scene units (default: 0.1 x the patch radius)")
+    p.add_argument("--camera", default="auto", help="camera position x,y,z or auto (framed from the bounding box)")
+    p.add_argument("--target", default="", help="point the camera looks at, x,y,z (default: bounding box centre)")
+    p.add_argument("--material", choices=["liquid", "matte", "grey"], default="liquid",
+                   help="liquid: glossy wet look; matte: rough; grey: flat grey, no texture (a reference)")
+    p.add_argument("--no-ground", action="store_true", help="no ground plane under the liquid")
+    p.add_argument("--transparent", action="store_true", help="transparent background (alpha in the PNG)")
+    p.add_argument("--view-transform", default="Filmic", choices=["Filmic", "Standard"],
+                   help="colour management view (Standard keeps the atlas colours as they are)")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops")
+    p.add_argument("--up", choices=["z", "y"], default="z", help="up axis of the bake's meshes")
+    a = p.parse_args(argv)
+    try:
+        w, h = (int(v) for v in a.resolution.lower().split("x"))
+        if w <= 0 or h <= 0:
+            raise ValueError
+    except ValueError:
+        raise BadInput(f"--resolution {a.resolution}: expected WxH, e.g. 1280x720")
+    a.size = (w, h)
+    if a.samples < 1:
+        raise BadInput("--samples must be at least 1")
+    return a
+
+
+def parse_vec(text, what):
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 3:
+        raise BadInput(f"{what} {text}: expected x,y,z")
+    return Vector(v)
+
+
+def parse_frames(text, available):
+    if not text:
+        return [available[0]]
+    frames = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part[1:]:
+                a, b = part.split("-", 1) if not part.startswith("-") else (part, "")
+                a, b = int(a), int(b)
+                frames += list(range(a, b + 1)) if a <= b else []
+            else:
+                frames.append(int(part))
+        except ValueError:
+            raise BadInput(f"--frames {text}: expected 1,10,20 or A-B")
+    missing = [f for f in frames if f not in available]
+    if missing:
+        raise BadInput(f"--frames: frame(s) {missing} were not baked (the bake has {available[0]}-{available[-1]})")
+    return frames
+
+
+def read_manifest(folder, name):
+    if not os.path.isdir(folder):
+        raise BadInput(f"{folder}: no such bake folder")
+    if name:
+        path = os.path.join(folder, name + ".bake.json")
+        if not os.path.isfile(path):
+            raise BadInput(f"{path}: no such bake manifest")
+    else:
+        found = sorted(glob.glob(os.path.join(folder, "*.bake.json")))
+        if not found:
+            raise BadInput(f"{folder}: no *.bake.json in this folder: is it a lapflow bake output?")
+        if len(found) > 1:
+            raise BadInput(f"{folder}: several bakes ({', '.join(os.path.basename(f) for f in found)}): pick one with --name")
+        path = found[0]
+    try:
+        with open(path) as f:
+            m = json.load(f)
+        return m["name"], [int(x) for x in m["frames"]], float(m.get("radius", 0.0)), path
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BadInput(f"{path}: not a readable lapflow bake manifest ({e})")
+
+
+def frame_files(folder, name, frame):
+    files = {"obj": f"{name}.{frame:04d}.obj", "color": f"{name}.color.{frame:04d}.exr",
+             "disp": f"{name}.disp.{frame:04d}.exr"}
+    files = {k: os.path.join(folder, v) for k, v in files.items()}
+    for kind, path in files.items():
+        if not os.path.isfile(path):
+            raise BadInput(f"{path} (frame {frame}): missing {kind} file of the bake")
+    return files
+
+
+def import_obj(path, up):
+    before = set(bpy.data.objects)
+    # Blender's OBJ importer (3.3+); keep the file's axes as they are.
+    if up == "z":
+        bpy.ops.wm.obj_import(filepath=path, forward_axis="Y", up_axis="Z")
+    else:
+        bpy.ops.wm.obj_import(filepath=path)
+    new = [o for o in bpy.data.objects if o not in before and o.type == "MESH"]
+    if not new:
+        raise BadInput(f"{path}: Blender imported no mesh from it")
+    obj = new[0]
+    for poly in obj.data.polygons:
+        poly.use_smooth = True
+    return obj
+
+
+def load_image(path, colorspace):
+    img = bpy.data.images.load(path, check_existing=False)
+    img.colorspace_settings.name = colorspace
+    # The atlas's alpha only marks chart texels; keep the colour as stored.
+    img.alpha_mode = "CHANNEL_PACKED"
+    return img
+
+
+def make_material(name, files, args, disp_scale):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nodes.new("ShaderNodeBsdfPrincipled")
+    links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    if args.material == "grey":
+        bsdf.inputs["Base Color"].default_value = (0.18, 0.18, 0.18, 1.0)
+        bsdf.inputs["Roughness"].default_value = 0.5
+        return mat
+    uv = nodes.new("ShaderNodeUVMap")
+    color = nodes.new("ShaderNodeTexImage")
+    # The atlas holds linear values already: no colour decoding.
+    color.image = load_image(files["color"], "Linear")
+    color.interpolation = "Linear"
+    color.extension = "EXTEND"
+    links.new(uv.outputs["UV"], color.inputs["Vector"])
+    links.new(color.outputs["Color"], bsdf.inputs["Base Color"])
+    if args.material == "liquid":
+        # Wet: a sharp clear coat over a moderately glossy base.
+        bsdf.inputs["Roughness"].default_value = 0.25
+        bsdf.inputs["Specular"].default_value = 0.5
+        bsdf.inputs["Clearcoat"].default_value = 0.8
+        bsdf.inputs["Clearcoat Roughness"].default_value = 0.04
+    else:
+        bsdf.inputs["Roughness"].default_value = 0.8
+        bsdf.inputs["Specular"].default_value = 0.2
+    if args.displacement == "none" or disp_scale <= 0:
+        return mat
+    disp = nodes.new("ShaderNodeTexImage")
+    disp.image = load_image(files["disp"], "Non-Color")
+    disp.interpolation = "Linear"
+    disp.extension = "EXTEND"
+    links.new(uv.outputs["UV"], disp.inputs["Vector"])
+    if args.displacement == "bump":
+        bump = nodes.new("ShaderNodeBump")
+        bump.inputs["Distance"].default_value = disp_scale
+        links.new(disp.outputs["Color"], bump.inputs["Height"])
+        links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+        links.new(bump.outputs["Normal"], bsdf.inputs["Clearcoat Normal"])
+    else:
+        node = nodes.new("ShaderNodeDisplacement")
+        node.inputs["Scale"].default_value = disp_scale
+        node.inputs["Midlevel"].default_value = 0.5
+        links.new(disp.outputs["Color"], node.inputs["Height"])
+        links.new(node.outputs["Displacement"], out.inputs["Displacement"])
+        mat.cycles.displacement_method = "BOTH"
+    return mat
+
+
+def world_bbox(objects):
+    lo = Vector((math.inf,) * 3)
+    hi = Vector((-math.inf,) * 3)
+    for obj in objects:
+        for corner in obj.bound_box:
+            p = obj.matrix_world @ Vector(corner)
+            lo = Vector(map(min, lo, p))
+            hi = Vector(map(max, hi, p))
+    return lo, hi
+
+
+def setup_scene(args):
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = args.samples
+    scene.cycles.use_denoising = False  # Debian's Blender has no OpenImageDenoise
+    scene.cycles.max_bounces = 4
+    scene.render.resolution_x, scene.render.resolution_y = args.size
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = args.transparent
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGBA" if args.transparent else "RGB"
+    scene.view_settings.view_transform = args.view_transform
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = args.exposure
+
+    world = bpy.data.worlds.new("lookdev_sky")
+    scene.world = world
+    world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    nodes.clear()
+    sky = nodes.new("ShaderNodeTexSky")
+    sky.sky_type = "HOSEK_WILKIE"
+    sky.sun_direction = Vector((0.4, -0.5, 0.75)).normalized()
+    sky.turbidity = 2.5
+    bg = nodes.new("ShaderNodeBackground")
+    bg.inputs["Strength"].default_value = 0.35
+    links.new(sky.outputs["Color"], bg.inputs["Color"])
+    links.new(bg.outputs["Background"], nodes.new("ShaderNodeOutputWorld").inputs["Surface"])
+
+    sun_data = bpy.data.lights.new("sun", "SUN")
+    sun_data.energy = 3.5
+    sun_data.angle = math.radians(3)
+    sun = bpy.data.objects.new("sun", sun_data)
+    sun.rotation_euler = Vector((0.4, -0.5, 0.75)).to_track_quat("Z", "Y").to_euler()
+    scene.collection.objects.link(sun)
+    return scene
+
+
+def add_ground(scene, lo, hi):
+    size = 4 * max((hi - lo).length, 1e-3)
+    bpy.ops.mesh.primitive_plane_add(size=size, location=((lo.x + hi.x) / 2, (lo.y + hi.y) / 2,
+                                                          lo.z - 1e-3 * size))
+    ground = bpy.context.active_object
+    mat = bpy.data.materials.new("ground")
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.32, 0.32, 0.3, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.9
+    ground.data.materials.append(mat)
+
+
+def add_camera(scene, args, lo, hi):
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.lens = 40
+    cam = bpy.data.objects.new("camera", cam_data)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    centre = (lo + hi) / 2
+    target = parse_vec(args.target, "--target") if args.target else centre
+    radius = max((hi - lo).length / 2, 1e-6)
+    if args.camera == "auto":
+        # From the front-right, above: the classic three-quarter lookdev view.
+        direction = Vector((0.55, -1.0, 0.65)).normalized()
+        w, h = args.size
+        half_fov = math.atan(0.5 * cam_data.sensor_width / cam_data.lens)  # along the wider side
+        if w < h:
+            half_fov = math.atan(math.tan(half_fov) * w / h)
+        elif h < w:
+            half_fov = math.atan(math.tan(half_fov) * h / w)
+        distance = 1.05 * radius / math.sin(half_fov)
+        position = target + direction * distance
+    else:
+        position = parse_vec(args.camera, "--camera")
+    cam.location = position
+    cam.rotation_euler = (target - position).to_track_quat("-Z", "Y").to_euler()
+    cam_data.clip_start = max(1e-4, 0.01 * radius)
+    cam_data.clip_end = 100 * (radius + (position - target).length)
+
+
+def main():
+    args = script_args()
+    name, available, radius, manifest = read_manifest(os.path.abspath(args.bake), args.name)
+    if not available:
+        raise BadInput(f"{manifest}: the bake lists no frames")
+    folder = os.path.dirname(manifest)
+    frames = parse_frames(args.frames, available)
+    files = {f: frame_files(folder, name, f) for f in frames}  # every file checked before any work
+    out_dir = os.path.abspath(args.out or os.path.join(folder, "lookdev"))
+    os.makedirs(out_dir, exist_ok=True)
+    disp_scale = args.displacement_scale if args.displacement_scale >= 0 else 0.1 * radius
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = setup_scene(args)
+    objects = {}
+    for f in frames:
+        obj = import_obj(files[f]["obj"], args.up)
+        obj.name = f"{name}.{f:04d}"
+        obj.data.materials.clear()
+        obj.data.materials.append(make_material(f"{name}.{f:04d}", files[f], args, disp_scale))
+        if args.displacement == "true" and args.material != "grey":
+            mod = obj.modifiers.new("subdivide", "SUBSURF")
+            mod.subdivision_type = "SIMPLE"
+            mod.levels = mod.render_levels = 2
+        objects[f] = obj
+    lo, hi = world_bbox(objects.values())
+    if not args.no_ground:
+        add_ground(scene, lo, hi)
+    add_camera(scene, args, lo, hi)
+
+    for f in frames:
+        for g, obj in objects.items():
+            obj.hide_render = g != f
+        scene.frame_set(f)
+        path = os.path.join(out_dir, f"{name}.{f:04d}.png")
+        scene.render.filepath = path
+        bpy.ops.render.render(write_still=True)
+        print(f"blender_lookdev: frame {f} -> {path}", flush=True)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except BadInput as e:
+        print(f"blender_lookdev: error: {e}", file=sys.stderr, flush=True)
+        sys.exit(2)
+    except SystemExit:
+        raise
+    except Exception as e:  # anything else is a bug or a Blender failure
+        import traceback
+        traceback.print_exc()
+        print(f"blender_lookdev: error: {e}", file=sys.stderr, flush=True)
+        sys.exit(1)
