@@ -32,7 +32,7 @@ struct FeatureMapOptions {
   double edge_sigma = 1.0;
   /// distance: a pixel is a strong edge when its gradient magnitude, divided
   /// by the image's robust maximum (edge_percentile), is at least this.
-  double edge_threshold = 0.25;
+  double edge_threshold = 0.5;
   /// Percentile (0-100] of the gradient magnitude that maps to edge strength 1
   /// (a robust maximum: a few very sharp pixels do not dim every other edge).
   double edge_percentile = 99.0;

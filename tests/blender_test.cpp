@@ -1,0 +1,133 @@
+// tools/blender_lookdev.py in Debian's Blender: a tiny bake rendered headless
+// must show the atlas's colours. Skipped when `blender` is not on PATH (CI).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/image.hpp"
+
+namespace lapflow {
+namespace {
+
+using test::TempDir;
+
+bool have_blender(const TempDir& dir) { return test::run_command("command -v blender", nullptr, nullptr, dir) == 0; }
+
+std::string lookdev(const std::string& args) {
+  return "blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_lookdev.py' -- " + args;
+}
+
+using Rgb = std::array<double, 3>;
+
+Rgb chromaticity(const Rgb& c) {
+  const double s = c[0] + c[1] + c[2];
+  return {c[0] / s, c[1] / s, c[2] / s};
+}
+double chroma_distance(const Rgb& a, const Rgb& b) {
+  const Rgb ca = chromaticity(a), cb = chromaticity(b);
+  return std::max({std::abs(ca[0] - cb[0]), std::abs(ca[1] - cb[1]), std::abs(ca[2] - cb[2])});
+}
+double luma(const Rgb& c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
+
+TEST(BlenderLookdev, RendersTheAtlasColoursOfABake) {
+  TempDir dir("blender");
+  if (!have_blender(dir)) GTEST_SKIP() << "blender is not on PATH: the Blender lookdev script is not tested here";
+  const std::string lapflow = LAPFLOW_BINARY;
+  std::string err;
+  ASSERT_EQ(test::run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames 2 --triangles 2000 --no-bake -q",
+                              nullptr, &err, dir),
+            0)
+      << err;
+  // lava: dark red-brown plates and orange cracks, far from grey.
+  ASSERT_EQ(test::run_command(lapflow + " bake --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --exemplar lava " +
+                                  "--resolution 256 --radius 0.05 -q --out '" + (dir / "bake") + "'",
+                              nullptr, &err, dir),
+            0)
+      << err;
+
+  // Matte, no bump, no ground, linear view: the render is albedo x lighting,
+  // so textured / grey (albedo 0.18) is the albedo the camera saw.
+  const std::string common = "--bake '" + (dir / "bake") +
+                             "' --frames 2 --samples 16 --resolution 160x120 --displacement none --no-ground "
+                             "--transparent --view-transform Standard --exposure -1 ";
+  ASSERT_EQ(test::run_command(lookdev(common + "--material matte --out '" + (dir / "tex") + "'"), nullptr, &err, dir), 0)
+      << err;
+  ASSERT_EQ(test::run_command(lookdev(common + "--material grey --out '" + (dir / "grey") + "'"), nullptr, &err, dir), 0)
+      << err;
+  const Image tex = read_image(dir / "tex/demo.0002.png"), grey = read_image(dir / "grey/demo.0002.png");
+  ASSERT_EQ(tex.width, 160);
+  ASSERT_EQ(tex.height, 120);
+  ASSERT_EQ(tex.channels, 4);
+  ASSERT_EQ(grey.width, 160);
+  ASSERT_EQ(grey.channels, 4);
+
+  // The atlas's mean colour over chart texels (A = 1).
+  const Image atlas = read_image(dir / "bake/demo.color.0002.exr");
+  Rgb atlas_mean{};
+  double atlas_n = 0;
+  for (std::size_t p = 0; p < std::size_t(atlas.width) * atlas.height; ++p)
+    if (atlas.pixels[p * 4 + 3] > 0.5f) {
+      for (int c = 0; c < 3; ++c) atlas_mean[std::size_t(c)] += atlas.pixels[p * 4 + std::size_t(c)];
+      ++atlas_n;
+    }
+  for (double& v : atlas_mean) v /= atlas_n;
+
+  // Over lit object pixels: mean render colour, mean seen albedo, its spread.
+  Rgb tex_mean{}, grey_mean{}, albedo_mean{};
+  std::vector<double> albedo_luma;
+  double object = 0;
+  for (std::size_t p = 0; p < std::size_t(tex.width) * tex.height; ++p) {
+    const float* t = &tex.pixels[p * 4];
+    const float* g = &grey.pixels[p * 4];
+    if (t[3] > 0.5f) ++object;
+    if (t[3] < 0.99f || g[3] < 0.99f || g[1] < 0.02f) continue;
+    Rgb albedo;
+    for (std::size_t c = 0; c < 3; ++c) {
+      tex_mean[c] += t[c];
+      grey_mean[c] += g[c];
+      albedo[c] = 0.18 * t[c] / g[c];
+      albedo_mean[c] += albedo[c];
+    }
+    albedo_luma.push_back(luma(albedo));
+  }
+  const double n = double(albedo_luma.size());
+  const double pixels = double(tex.width) * tex.height;
+  ASSERT_GT(n, 0.05 * pixels) << "the object covers too little of the frame: camera framing is off";
+  EXPECT_LT(object, 0.95 * pixels) << "the object fills the whole frame: camera framing is off";
+  for (std::size_t c = 0; c < 3; ++c) tex_mean[c] /= n, grey_mean[c] /= n, albedo_mean[c] /= n;
+
+  double var = 0;
+  for (double l : albedo_luma) var += (l - luma(albedo_mean)) * (l - luma(albedo_mean));
+  const double variation = std::sqrt(var / n) / luma(albedo_mean);
+  std::printf("atlas mean %.3f %.3f %.3f | seen albedo %.3f %.3f %.3f (variation %.2f) | chroma distance textured "
+              "%.3f, grey %.3f\n",
+              atlas_mean[0], atlas_mean[1], atlas_mean[2], albedo_mean[0], albedo_mean[1], albedo_mean[2], variation,
+              chroma_distance(tex_mean, atlas_mean), chroma_distance(grey_mean, atlas_mean));
+
+  // The seen albedo has the atlas's colour and brightness.
+  EXPECT_LT(chroma_distance(albedo_mean, atlas_mean), 0.05)
+      << "albedo " << albedo_mean[0] << " " << albedo_mean[1] << " " << albedo_mean[2] << " vs atlas " << atlas_mean[0]
+      << " " << atlas_mean[1] << " " << atlas_mean[2];
+  EXPECT_NEAR(luma(albedo_mean) / luma(atlas_mean), 1.0, 0.3);
+  // The textured render is coloured like the atlas, unlike the grey one.
+  EXPECT_LT(chroma_distance(tex_mean, atlas_mean), 0.5 * chroma_distance(grey_mean, atlas_mean));
+  // The texture shows as variation (lava: dark plates, bright cracks), far
+  // above the render noise of the ratio.
+  EXPECT_GT(variation, 0.2);
+}
+
+TEST(BlenderLookdev, MissingBakeFailsWithAClearMessage) {
+  TempDir dir("blender_missing");
+  if (!have_blender(dir)) GTEST_SKIP() << "blender is not on PATH: the Blender lookdev script is not tested here";
+  std::string err;
+  EXPECT_EQ(test::run_command(lookdev("--bake '" + (dir / "no_such_bake") + "'"), nullptr, &err, dir), 2);
+  EXPECT_NE(err.find("no_such_bake"), std::string::npos) << err;
+  EXPECT_NE(err.find("blender_lookdev: error"), std::string::npos) << err;
+}
+
+}  // namespace
+}  // namespace lapflow
