@@ -153,11 +153,13 @@ std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const P
       patches.patches.push_back(std::move(*made[k]));
       ++born;
     }
+    if (ctx.mode == RasterMode::Blend) ctx.blend.contributed.resize(patches.patches.size(), 0);
     std::vector<RasterCounters> counters(patches.patches.size() - first_index);
     parallel_for(counters.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t k = b; k < e; ++k)
         rasterize_patch(ctx, patches.patches[first_index + k], first_index + k, counters[k]);
     }, 1);
+    if (ctx.mode == RasterMode::Blend) blend_mark_coverage(ctx);
     for (uint32_t i : seeds)
       if (ctx.keys[i] == kNoKey) failed.insert(tm.triangle[i]);
   }

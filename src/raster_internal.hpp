@@ -16,6 +16,38 @@ inline uint64_t make_key(std::size_t patch_index, std::size_t triangle) {
   return (uint64_t(patch_index) << 32) | uint64_t(uint32_t(triangle));
 }
 
+/// One texel a patch triangle covers (Blend mode): chart texel, patch
+/// triangle, and the patch's (u, v, w) there.
+struct BlendSample {
+  int32_t texel;
+  uint32_t triangle;
+  double u, v, w;
+};
+
+/// Blend mode accumulators (docs/raster.md, "Blend mode"). Weights and
+/// weighted values are summed in 2^-32 fixed point with 64-bit integer atomic
+/// adds: exact, so the sums do not depend on the order or the thread count.
+inline constexpr double kBlendScale = 4294967296.0;  // 2^32
+/// A texel is covered in Blend mode when its summed weight exceeds this.
+inline constexpr double kBlendMinWeight = 1e-3;
+inline constexpr int64_t kBlendMinFixed = int64_t(kBlendMinWeight * kBlendScale);
+struct BlendState {
+  const ExemplarMips* mips = nullptr;
+  double lod = 0;
+  bool trilinear = true;
+  /// 1: sample and sum every covering patch; 2: write ctx.keys of the texels'
+  /// largest-weight patches (the AOV winners).
+  int phase = 1;
+  /// Per chart texel, 5 values: sum W, sum W R, sum W G, sum W B, sum W H.
+  std::vector<int64_t> sums;
+  /// Per chart texel: float bits of the largest w << 32 | ~patch index (atomic
+  /// max: the largest weight, ties to the oldest patch).
+  std::vector<uint64_t> best;
+  /// Per patch index: chart texels it gave weight to (for retirement).
+  std::vector<uint64_t> contributed;
+  bool covered(std::size_t i) const { return sums[i * 5] > kBlendMinFixed; }
+};
+
 struct RasterContext {
   const TriMesh& mesh;
   const SurfaceAtlas& atlas;
@@ -42,6 +74,8 @@ struct RasterContext {
   /// metres: sorted (cell hash, vertex) pairs.
   double seam_cell = 0;
   std::vector<std::pair<uint64_t, int32_t>> seam_grid;
+  /// Blend mode only.
+  BlendState blend;
 
   RasterContext(const TriMesh& m, const SurfaceAtlas& a, const ErosionMap& e, RasterMode mo, double dm)
       : mesh(m), atlas(a), erosion(e), mode(mo), delta_max(dm) {}
@@ -58,6 +92,14 @@ void setup_context(RasterContext& ctx);
 /// Rasterizes every triangle of `patch` (PatchSet index `patch_index`) into
 /// ctx.keys by atomic min. Safe to call concurrently for different patches.
 void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters);
+
+/// Blend mode: the samples of one patch (any order, duplicates allowed; the
+/// lowest patch triangle of each texel counts) added to ctx.blend (phase 1)
+/// or written as AOV winner keys (phase 2). Sorts `samples`.
+void blend_patch(RasterContext& ctx, std::size_t patch_index, std::vector<BlendSample>& samples);
+/// Blend mode: ctx.keys set to 0 on chart texels whose summed weight covers
+/// them, kNoKey elsewhere (what hole filling reads).
+void blend_mark_coverage(RasterContext& ctx);
 
 /// Atlas pixel coordinates (texel centres at integers) of the three vertices
 /// of patch triangle t as seen from the texel's fluid triangle `texel_tri`:

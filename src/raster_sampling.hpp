@@ -32,6 +32,7 @@ inline void bilinear(const Image& img, double u, double v, float* out) {
 inline bool keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode) {
   if (!(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;  // also rejects NaN
   if (mode == RasterMode::Advect) return true;
+  if (mode == RasterMode::Blend) return w > 0;  // every covering patch contributes, weighted by w
   float f;
   bilinear<1>(map.feature, u, v, &f);
   const double d = std::sqrt((u - 0.5) * (u - 0.5) + (v - 0.5) * (v - 0.5));

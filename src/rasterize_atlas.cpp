@@ -79,9 +79,9 @@ constexpr double kInsideTol = 1e-9;
 
 // Draws one patch triangle (pixel positions P) into the texels accepted by
 // `accept(texel index)`, inside the clip box; erosion is the discard.
-template <class Accept>
-void draw_triangle(RasterContext& ctx, const Vec2 P[3], const Vec2 uv[3], const float w[3], uint64_t key, int cx0,
-                   int cy0, int cx1, int cy1, Accept&& accept) {
+template <class Sink, class Accept>
+void draw_triangle(RasterContext& ctx, Sink& sink, const Vec2 P[3], const Vec2 uv[3], const float w[3], uint64_t key,
+                   int cx0, int cy0, int cx1, int cy1, Accept&& accept) {
   Bary b;
   if (!b.init(P)) return;
   const int x0 = std::max(cx0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
@@ -97,16 +97,13 @@ void draw_triangle(RasterContext& ctx, const Vec2 P[3], const Vec2 uv[3], const 
       double l0, l1, l2;
       b.at(x, y, l0, l1, l2);
       if (l0 < -kInsideTol || l1 < -kInsideTol || l2 < -kInsideTol) continue;
-      std::atomic_ref<uint64_t> slot(ctx.keys[idx]);
-      uint64_t cur = slot.load(std::memory_order_relaxed);
-      if (cur <= key) continue;  // an older patch (or this one) already keeps it
+      if (sink.taken(idx, key)) continue;  // an older patch (or this one) already keeps it
       if (!accept(idx)) continue;
       const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
       if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
-      while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
-      }
+      sink.put(idx, key, u, v, wt);
     }
   }
 }
@@ -146,7 +143,8 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
 // Seam fallback: the fluid triangles near the patch triangle (walk over shared
 // vertices from its vertices' triangles, bounded by its bounding sphere plus a
 // margin), each drawn through its own affine map into its own texels.
-void draw_seam_triangle(RasterContext& ctx, const Patch& patch, int ti, const int vtri[3], uint64_t key,
+template <class Sink>
+void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int ti, const int vtri[3], uint64_t key,
                         std::vector<int32_t>& found, int exclude_chart = -1) {
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
@@ -183,7 +181,7 @@ void draw_seam_triangle(RasterContext& ctx, const Patch& patch, int ti, const in
     const Tri& FT = ctx.mesh.triangles[F];
     const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
     const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
-    draw_triangle(ctx, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
+    draw_triangle(ctx, sink, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
       if (tm.triangle[idx] != F) return false;
       const double b1 = tm.b1[idx], b2 = tm.b2[idx];
       const Vec3 x = ctx.mesh.positions[FT[0]] * (1 - b1 - b2) + ctx.mesh.positions[FT[1]] * b1 +
@@ -309,8 +307,9 @@ struct ChartTriangle {
 // instead of hopping N texels at every triangle row.
 // Sets leaky[k] when triangle k covers a pixel centre outside its chart: its
 // vertices are in one chart but part of it lies across a seam or boundary.
-void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTriangle* tris, std::size_t count,
-                      std::vector<int32_t>& local, uint8_t* leaky) {
+template <class Sink>
+void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, const ChartTriangle* tris,
+                      std::size_t count, std::vector<int32_t>& local, uint8_t* leaky) {
   int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
   for (std::size_t k = 0; k < count; ++k) {
     bx0 = std::min(bx0, tris[k].x0), by0 = std::min(by0, tris[k].y0);
@@ -330,7 +329,7 @@ void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTr
     for (std::size_t k = 0; k < count; ++k) {
       const ChartTriangle& t = tris[k];
       const Vec2 P[3] = {t.bary.p0, t.bary.p0 + t.bary.e1, t.bary.p0 + t.bary.e2};
-      draw_triangle(ctx, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
+      draw_triangle(ctx, sink, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
                     [&](int32_t idx) { return chart_of[tri_of[idx]] == chart; });
       leaky[k] = 1;  // not checked on this rare path: let the seam fallback look
     }
@@ -383,24 +382,44 @@ void draw_chart_group(RasterContext& ctx, std::size_t patch_index, const ChartTr
       }
       const ChartTriangle& t = tris[k];
       const uint64_t key = make_key(patch_index, std::size_t(t.index));
-      std::atomic_ref<uint64_t> slot(ctx.keys[idx]);
-      uint64_t cur = slot.load(std::memory_order_relaxed);
-      if (cur <= key) continue;
+      if (sink.taken(idx, key)) continue;
       double l0, l1, l2;
       t.bary.at(x, y, l0, l1, l2);
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
       if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
-      while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
-      }
+      sink.put(idx, key, u, v, wt);
     }
   }
 }
 
-}  // namespace
+// Erosion and Advect: each texel keeps the smallest key by atomic min.
+struct KeySink {
+  std::vector<uint64_t>& keys;
+  bool taken(int32_t idx, uint64_t key) const {
+    return std::atomic_ref<uint64_t>(keys[idx]).load(std::memory_order_relaxed) <= key;
+  }
+  void put(int32_t idx, uint64_t key, double, double, double) {
+    std::atomic_ref<uint64_t> slot(keys[idx]);
+    uint64_t cur = slot.load(std::memory_order_relaxed);
+    while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
+    }
+  }
+};
 
-void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters) {
+// Blend: every texel the patch covers is collected (raster_blend.cpp sums them).
+struct SampleSink {
+  std::vector<BlendSample>& out;
+  bool taken(int32_t, uint64_t) const { return false; }
+  void put(int32_t idx, uint64_t key, double u, double v, double w) {
+    out.push_back({idx, uint32_t(key & 0xffffffffu), u, v, w});
+  }
+};
+
+template <class Sink>
+void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, std::size_t patch_index,
+                          RasterCounters& counters) {
   const std::size_t nv = patch.positions.size();
   if (patch.rest_uv.size() != nv) return;
   // Per vertex: its fluid triangle and, through it, its atlas pixel position.
@@ -460,12 +479,12 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
       } else if (crosses) {
         const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
         ++counters.seam_triangles;
-        draw_seam_triangle(ctx, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0);
+        draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0);
       }
     } else {
       ++counters.seam_triangles;
       const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
-      draw_seam_triangle(ctx, patch, int(ti), vt, make_key(patch_index, ti), scratch);
+      draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch);
     }
   }
   // Group by chart (stable: triangle order kept inside a chart).
@@ -480,7 +499,7 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
   for (std::size_t b = 0; b < in_chart.size();) {
     std::size_t e = b;
     while (e < in_chart.size() && in_chart[e].chart == in_chart[b].chart) ++e;
-    draw_chart_group(ctx, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
+    draw_chart_group(ctx, sink, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
     b = e;
   }
   // The parts of leaky triangles beyond their chart, through the fallback.
@@ -489,9 +508,24 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
     ++counters.seam_triangles;
     const Tri& t = patch.triangles[in_chart[k].index];
     const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
-    draw_seam_triangle(ctx, patch, in_chart[k].index, vt, make_key(patch_index, std::size_t(in_chart[k].index)),
-                       scratch, in_chart[k].chart);
+    draw_seam_triangle(ctx, sink, patch, in_chart[k].index, vt,
+                       make_key(patch_index, std::size_t(in_chart[k].index)), scratch, in_chart[k].chart);
   }
+}
+
+}  // namespace
+
+void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters) {
+  if (ctx.mode != RasterMode::Blend) {
+    KeySink sink{ctx.keys};
+    rasterize_patch_into(ctx, sink, patch, patch_index, counters);
+    return;
+  }
+  thread_local std::vector<BlendSample> samples;
+  samples.clear();
+  SampleSink sink{samples};
+  rasterize_patch_into(ctx, sink, patch, patch_index, counters);
+  blend_patch(ctx, patch_index, samples);
 }
 
 bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int texel_tri, Vec2 out[3],
@@ -529,8 +563,6 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   RasterContext ctx(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
   ctx.locate = locate ? &locate : nullptr;
   ctx.radius = options.radius;
-  if (options.mode == RasterMode::Blend)
-    throw std::invalid_argument("rasterize_atlas: RasterMode::Blend is not implemented yet");
   setup_context(ctx);
   const int N = ctx.N;
   const TexelMap& tm = atlas.texels;
@@ -552,6 +584,15 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   const Image& base = exemplar.mips.levels[0];
   const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
   st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
+  const bool blend = options.mode == RasterMode::Blend;
+  if (blend) {
+    ctx.blend.mips = &exemplar.mips;
+    ctx.blend.lod = st.lod;
+    ctx.blend.trilinear = options.trilinear;
+    ctx.blend.sums.assign(tm.size() * 5, 0);
+    ctx.blend.best.assign(tm.size(), 0);
+    ctx.blend.contributed.assign(patches.patches.size(), 0);
+  }
   st.seconds_setup = seconds_since(t_start);
 
   // Pass 1: every patch triangle, any order (the atomic min decides).
@@ -570,12 +611,27 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
 
   // Step 8.
   t0 = Clock::now();
+  if (blend) blend_mark_coverage(ctx);
   if (options.fill_holes && make_patch) st.patches_born = fill_holes(ctx, patches, frame, make_patch, options.max_hole_patches);
+  st.seconds_holes = seconds_since(t0);
+  if (blend) {
+    // The AOV winners (largest weight, ties to the oldest): a second raster
+    // pass now that every texel's maximum is known (timed with the raster).
+    t0 = Clock::now();
+    std::fill(ctx.keys.begin(), ctx.keys.end(), kNoKey);
+    ctx.blend.phase = 2;
+    parallel_for(patches.patches.size(), [&](std::size_t b, std::size_t e) {
+      RasterCounters unused;
+      for (std::size_t p = b; p < e; ++p) rasterize_patch(ctx, patches.patches[p], p, unused);
+    }, 1);
+    st.seconds_raster += seconds_since(t0);
+  }
   // Texels hole filling could not reach (create_patch failed there) still
   // need a colour: they take a covered neighbour's winner within their chart.
   // Without hole filling the holes are left visible (alpha 0).
+  t0 = Clock::now();
   if (options.fill_holes) st.forced_texels = propagate_keys(ctx);
-  st.seconds_holes = seconds_since(t0);
+  st.seconds_holes += seconds_since(t0);
 
   // Resolve: the winner's (u, v, w) at the texel centre, then E and H.
   t0 = Clock::now();
@@ -600,6 +656,7 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
       const uint64_t key = ctx.keys[i];
       float s[4] = {fallback[0], fallback[1], fallback[2], fallback[3]};
       float aov[4] = {-1.f, 0.f, 0.f, 0.f};
+      const bool blended = blend && ctx.blend.covered(i);  // else a forced texel: its key's patch extrapolated
       if (key != kNoKey) {
         const std::size_t p = std::size_t(key >> 32);
         const int ti = int(key & 0xffffffffu);
@@ -620,7 +677,7 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
-          sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
+          if (!blended) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }
         if (p != run_patch) {
@@ -628,6 +685,10 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
           run_patch = p, run = 0;
         }
         ++run;
+      }
+      if (blended) {
+        const int64_t* sum = &ctx.blend.sums[i * 5];
+        for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
       }
       float* c = &out.color.pixels[std::size_t(pix) * 4];
       c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
@@ -647,7 +708,8 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   kept.reserve(patches.patches.size());
   for (std::size_t p = 0; p < patches.patches.size(); ++p) {
     const uint64_t n = won[p].load(std::memory_order_relaxed);
-    if (retire && n == 0) {
+    // Blend: a patch that gave weight to no texel retires (it may win none).
+    if (retire && (blend ? ctx.blend.contributed[p] == 0 : n == 0)) {
       ++st.patches_retired;
       continue;
     }

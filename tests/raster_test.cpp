@@ -444,17 +444,160 @@ TEST(Raster, AdvectModeNeitherErodesNorRetires) {
   EXPECT_EQ(kept.stats.texels_per_patch[1], 0u);  // the younger copy is hidden everywhere
 }
 
-TEST(Raster, RejectsAnAtlasOfAnotherMeshAndBlendMode) {
+TEST(Raster, RejectsAnAtlasOfAnotherMesh) {
   Scene sc = random_scene(false, 3, 1, 64);
   SurfaceAtlas wrong = sc.f.atlas;
   wrong.corner_uv.pop_back();
   RasterOptions o;
   o.radius = sc.r;
-  EXPECT_THROW(rasterize_atlas(sc.f.mesh, wrong, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
-               std::invalid_argument);
+  for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
+    o.mode = mode;
+    EXPECT_THROW(rasterize_atlas(sc.f.mesh, wrong, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
+                 std::invalid_argument);
+  }
+}
+
+// Blend mode (the 2019 baseline): colour = sum w_i c_i / sum w_i over the
+// covering patches, checked against the analytic (u, v, w) of two patches on
+// the ramp exemplar (colour = (u, v, 0.5)).
+TEST(RasterBlend, OverlapIsTheExactWeightedAverage) {
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, 192, false);
+  sc.ex = test::ramp_exemplar(64, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = 0.3;
+  PatchSpec a;
+  a.centre = {0.4, 0.45, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 0.8, a.wx = 0.5;  // affine weight: exact
+  PatchSpec b = a;
+  b.centre = {0.6, 0.55, 0}, b.w0 = 0.3, b.wx = 0, b.wy = -0.4, b.angle = 0.7;
+  sc.add(a);
+  sc.add(b);
+  RasterOptions o;
   o.mode = RasterMode::Blend;
-  EXPECT_THROW(rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
-               std::invalid_argument);
+  o.mipmap = false;
+  o.fill_holes = false;
+  const FrameTextures out = sc.run(o, false);
+  const auto& tm = sc.f.atlas.texels;
+  const int N = 192;
+  auto inner = [](const Vec2& uv) { return std::min({uv.x, uv.y, 1 - uv.x, 1 - uv.y}) > 0.02; };
+  std::size_t both = 0, only_a = 0, covered = 0;
+  double worst = 0, worst_aov = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const int x = int(tm.texel[k] % N), y = int(tm.texel[k] / N);
+    covered += out.color.at(x, y, 3) == 1.f;
+    const Vec3 p = sc.f.texel_point(k);
+    const Vec2 ua = a.uv_at(p), ub = b.uv_at(p);
+    const double wa = a.w_at(p), wb = b.w_at(p);
+    const bool in_a = a.covers(p, 1) && inner(ua) && wa > 0.01, in_b = b.covers(p, 1) && inner(ub) && wb > 0.01;
+    const bool out_b = !b.covers(p, 1) || std::min({ub.x, ub.y, 1 - ub.x, 1 - ub.y}) < -0.02 || wb < -0.01;
+    if (in_a && in_b) {
+      ++both;
+      const double r = (wa * ua.x + wb * ub.x) / (wa + wb), g = (wa * ua.y + wb * ub.y) / (wa + wb);
+      worst = std::max({worst, std::abs(out.color.at(x, y, 0) - r), std::abs(out.color.at(x, y, 1) - g),
+                        std::abs(out.color.at(x, y, 2) - 0.5)});
+      // AOV: the larger weight, at its own (u, v).
+      const bool a_wins = wa > wb + 1e-6, b_wins = wb > wa + 1e-6;
+      if (a_wins || b_wins) {
+        const PatchSpec& s = a_wins ? a : b;
+        EXPECT_EQ(out.aov.at(x, y, 0), a_wins ? 0.f : 1.f);
+        worst_aov = std::max({worst_aov, std::abs(out.aov.at(x, y, 1) - s.uv_at(p).x),
+                              std::abs(out.aov.at(x, y, 3) - s.w_at(p))});
+      }
+    } else if (in_a && out_b) {
+      ++only_a;
+      worst = std::max({worst, std::abs(out.color.at(x, y, 0) - ua.x), std::abs(out.color.at(x, y, 1) - ua.y)});
+      EXPECT_EQ(out.aov.at(x, y, 0), 0.f);
+    }
+  }
+  EXPECT_GT(both, 2000u);
+  EXPECT_GT(only_a, 1000u);
+  EXPECT_LT(worst, 2e-6);  // float colour of an exact weighted average
+  EXPECT_LT(worst_aov, 1e-5);
+  EXPECT_EQ(covered, out.stats.covered_texels);
+  // Without erosion the union of the two squares (where w > 0) is covered.
+  EXPECT_GT(out.stats.covered_texels, std::size_t(0.4 * double(out.stats.chart_texels)));
+  EXPECT_EQ(out.stats.patches_retired, 0u);
+}
+
+TEST(RasterBlend, HiddenPatchesContributeAndOnlyWeightlessOnesRetire) {
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, 128, false);
+  sc.ex = test::ramp_exemplar(32, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = 0.3;
+  PatchSpec a;
+  a.centre = {0.5, 0.5, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 1.0;
+  PatchSpec hidden = a;  // erosion would retire it (see OlderPatchHidesYoungerOneWhichRetires)
+  hidden.w0 = 0.7, hidden.angle = 0.3;
+  PatchSpec weightless = a;
+  weightless.w0 = 0;
+  sc.add(a);
+  sc.add(hidden);
+  sc.add(weightless);
+  RasterOptions o;
+  o.mode = RasterMode::Blend;
+  o.fill_holes = false;
+  const FrameTextures out = sc.run(o, false);
+  ASSERT_EQ(sc.patches.patches.size(), 2u);
+  EXPECT_EQ(sc.patches.patches[0].id, 0u);
+  EXPECT_EQ(sc.patches.patches[1].id, 1u);
+  EXPECT_EQ(out.stats.patches_retired, 1u);
+  // The AOV names the heavier patch everywhere both cover.
+  EXPECT_EQ(out.stats.texels_per_patch[0], out.stats.covered_texels);
+  EXPECT_EQ(out.stats.texels_per_patch[1], 0u);
+}
+
+// Luminance standard deviation over covered chart texels.
+double contrast(const FrameTextures& out, const SurfaceAtlas& atlas) {
+  double s = 0, s2 = 0;
+  std::size_t n = 0;
+  for (uint32_t t : atlas.texels.texel) {
+    const float* c = &out.color.pixels[std::size_t(t) * 4];
+    if (c[3] != 1.f) continue;
+    const double y = 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    s += y, s2 += y * y, ++n;
+  }
+  const double m = s / double(n);
+  return std::sqrt(std::max(0.0, s2 / double(n) - m * m));
+}
+
+TEST(RasterBlend, GhostingLowersContrastAgainstErosion) {
+  auto bake = [](RasterMode mode) {
+    Scene sc = random_scene(true, 60, 17);
+    for (int y = 0; y < 64; ++y)  // a black-and-white checker: blending misaligned copies greys it
+      for (int x = 0; x < 64; ++x)
+        for (int c = 0; c < 3; ++c) sc.ex.color.at(x, y, c) = float(((x / 8) + (y / 8)) % 2);
+    sc.rex = prepared(sc.ex);
+    RasterOptions o;
+    o.mode = mode;
+    FrameTextures out = sc.run(o);
+    EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+    return std::make_pair(contrast(out, sc.f.atlas), std::move(out));
+  };
+  const auto [erosion, e] = bake(RasterMode::Erosion);
+  const auto [blend, b] = bake(RasterMode::Blend);
+  EXPECT_GT(erosion, 0.3);  // mostly pure black and white texels (mip filtering softens the edges)
+  EXPECT_LT(blend, 0.85 * erosion);
+}
+
+TEST(RasterBlend, SameImagesForOneAndTwoThreads) {
+  auto bake = [](int threads) {
+    set_thread_count(threads);
+    Scene sc = random_scene(true, 60, 99);
+    RasterOptions o;
+    o.mode = RasterMode::Blend;
+    FrameTextures out = sc.run(o);
+    set_thread_count(0);
+    return std::make_pair(std::move(out), sc.patches.patches.size());
+  };
+  const auto [a, na] = bake(1);
+  const auto [b, nb] = bake(2);
+  EXPECT_EQ(na, nb);
+  EXPECT_EQ(a.stats.covered_texels, a.stats.chart_texels);
+  EXPECT_EQ(a.stats.patches_born, b.stats.patches_born);
+  EXPECT_TRUE(a.color.pixels == b.color.pixels);
+  EXPECT_TRUE(a.displacement.pixels == b.displacement.pixels);
+  EXPECT_TRUE(a.aov.pixels == b.aov.pixels);
 }
 
 }  // namespace

@@ -8,6 +8,9 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <string>
 
 #include "bench.hpp"
 #include "lapflow/parallel.hpp"
@@ -177,6 +180,19 @@ double lookup_ns(const ExemplarMips& mips, double lod, bool trilinear = true) {
   return s * 1e9 / (double(kRows) * kCols);
 }
 
+// FNV-1a over the bytes of the output images: equal digests before and after
+// an optimisation mean the output did not change.
+uint64_t digest(const FrameTextures& t) {
+  uint64_t h = 1469598103934665603ull;
+  for (const Image* img : {&t.color, &t.displacement, &t.aov})
+    for (float f : img->pixels) {
+      uint32_t b;
+      std::memcpy(&b, &f, 4);
+      for (int k = 0; k < 4; ++k) h = (h ^ ((b >> (8 * k)) & 0xffu)) * 1099511628211ull;
+    }
+  return h;
+}
+
 }  // namespace
 
 void bench_raster(const std::vector<int>& resolutions, int grid_cells, int target_patches, int threads) {
@@ -208,6 +224,10 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
     };
     RasterOptions o;
     o.radius = r;
+    // LAPFLOW_BENCH_MODE=blend|advect benchmarks the other raster modes.
+    if (const char* m = std::getenv("LAPFLOW_BENCH_MODE"))
+      o.mode = std::string(m) == "blend" ? RasterMode::Blend
+                                         : std::string(m) == "advect" ? RasterMode::Advect : RasterMode::Erosion;
     const double cpu0 = cpu_seconds();
     const FrameTextures out =
         rasterize_atlas(P.mesh, P.atlas, rex, o, WeightOptions{}, 0, maker, TriangleLocator{}, patches);
@@ -215,7 +235,7 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
     fmt::print("{:>6} {:>10} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7} {:>6} {:>7} {:>7.2f}\n", N,
                s.chart_texels, s.seconds_setup, s.seconds_raster, s.seconds_holes, s.seconds_resolve,
                s.seconds_dilate, s.seconds_total, s.seam_triangles, s.patches_born, s.patches_retired, peak_rss_gb());
-    fmt::print("       cpu {:.3f} s\n", cpu_seconds() - cpu0);
+    fmt::print("       cpu {:.3f} s, output digest {:016x}\n", cpu_seconds() - cpu0, digest(out));
     if (s.covered_texels != s.chart_texels)
       fmt::print("  coverage {} of {} chart texels!\n", s.covered_texels, s.chart_texels);
   }

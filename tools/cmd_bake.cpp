@@ -160,8 +160,9 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
-                 "erosion (the paper) or advect (no erosion, no retirement: a purely advected texture that stretches)")
-      ->check(CLI::IsMember({"erosion", "advect"}))
+                 "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "
+                 "ghosts) or advect (no erosion, no retirement: a purely advected texture that stretches)")
+      ->check(CLI::IsMember({"erosion", "blend", "advect"}))
       ->capture_default_str()
       ->group("Erosion");
   cmd.add_option("--resolution", o.atlas.resolution, "Atlas width = height in texels (0 = from the exemplar's density)")

@@ -24,7 +24,7 @@ namespace lapflow {
 /// How patches compose into a texel.
 enum class RasterMode {
   Erosion,  ///< the paper (2021): oldest non-eroded patch wins, no blending
-  Blend,    ///< 2019 method: every covering patch contributes, alpha w, oldest on top
+  Blend,    ///< 2019 baseline: every covering patch with w > 0 contributes, colour = sum w c / sum w (ghosts)
   Advect,   ///< no erosion, no retirement (oldest covering patch wins); holes still filled
 };
 
@@ -74,7 +74,7 @@ ExemplarMips build_exemplar_mips(const Exemplar& exemplar);
 ErosionMap build_erosion_map(const Image& feature, double epsilon);
 
 /// True when the patch keeps the texel (ALGORITHM.md step 7; see ErosionMap).
-/// In Advect mode only the [0,1]^2 test applies.
+/// In Advect mode only the [0,1]^2 test applies; in Blend mode, [0,1]^2 and w > 0.
 bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode = RasterMode::Erosion);
 
 /// Colour and displacement (R, G, B, H) at patch coordinates (u, v), clamped
@@ -84,7 +84,7 @@ void sample_exemplar(const ExemplarMips& mips, double u, double v, double lod, f
 
 struct RasterStats {
   std::size_t chart_texels = 0;
-  std::size_t covered_texels = 0;  ///< chart texels a patch kept (100% after hole filling, unless a fallback failed)
+  std::size_t covered_texels = 0;  ///< chart texels with a patch (kept, or forced); Blend: summed w above 1e-3, or forced
   std::size_t forced_texels = 0;   ///< chart texels given the patch of a neighbour because hole filling could not cover them
   std::size_t patches_born = 0;    ///< by hole filling
   std::size_t patches_retired = 0;
@@ -92,7 +92,8 @@ struct RasterStats {
   std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
   double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
   double texel_world_size = 0;     ///< metres per atlas texel (area-weighted mean)
-  /// Chart texels won by each patch, aligned with PatchSet::patches after retirement.
+  /// Chart texels won by each patch, aligned with PatchSet::patches after retirement
+  /// (Blend: texels where it has the largest weight, i.e. names the AOV).
   std::vector<uint64_t> texels_per_patch;
   double seconds_setup = 0, seconds_raster = 0, seconds_holes = 0, seconds_resolve = 0, seconds_dilate = 0,
          seconds_total = 0;
@@ -104,6 +105,7 @@ struct FrameTextures {
   Image color;         ///< RGBA linear; A = 1 on covered chart texels (coverage), 0 elsewhere (RGB dilated there)
   Image displacement;  ///< 1 channel, H of the winning patch (dilated outside charts)
   Image aov;           ///< patch_id (stable Patch::id as float, -1 where none), u, v, w; empty unless RasterOptions::aov
+                       ///< (Blend: the patch of largest w at the texel, ties to the oldest)
   RasterStats stats;
 };
 
