@@ -50,194 +50,209 @@ std::unique_ptr<SurfaceFrame> load_frame(const BakeOptions& o, const FramePatter
   s->frame = frame;
   s->path = meshes.path(frame);
   try {
-      s->mesh = read_mesh(s->path);
+    s->mesh = read_mesh(s->path);
+  } catch (const InputError& e) {
+    throw e.with_frame(frame);
+  }
+  s->query = std::make_unique<SurfaceQuery>(s->mesh);
+  if (!o.velocity_vdb_pattern.empty()) {
+    const std::string vdb = FramePattern(o.velocity_vdb_pattern).path(frame);
+    try {
+      s->grid = std::make_unique<VelocityGrid>(vdb, o.velocity_grid);
     } catch (const InputError& e) {
       throw e.with_frame(frame);
     }
-    s->query = std::make_unique<SurfaceQuery>(s->mesh);
-    if (!o.velocity_vdb_pattern.empty()) {
-      const std::string vdb = FramePattern(o.velocity_vdb_pattern).path(frame);
-      try {
-        s->grid = std::make_unique<VelocityGrid>(vdb, o.velocity_grid);
-      } catch (const InputError& e) {
-        throw e.with_frame(frame);
-      }
-      s->velocity = grid_velocity_field(*s->grid);
-      s->velocity_source = "vdb:" + s->grid->grid_name();
-    } else if (s->mesh.has_velocities()) {
-      s->velocity = vertex_velocity_field(*s->query);
-      s->velocity_source = "vertex";
-      if (o.velocity_band > 0) {
-        s->velocity = banded_velocity_field(std::move(s->velocity), s->mesh, o.velocity_voxel * mean_edge_length(s->mesh),
-                                            o.velocity_band);
-        s->velocity_source = "vertex (band of " + std::to_string(o.velocity_band) + " voxels)";
-      }
-    } else if (s->mesh.empty() || o.allow_zero_velocity) {
-      s->velocity = [](const Vec3&) { return Vec3{}; };
-      s->velocity_source = "zero";
-    } else {
-      throw InputError(s->path,
-                       "no per-vertex velocity (vx vy vz) and no --velocity-vdb; pass --allow-zero-velocity to bake a "
-                       "still texture",
-                       frame);
+    s->velocity = grid_velocity_field(*s->grid);
+    s->velocity_source = "vdb:" + s->grid->grid_name();
+  } else if (s->mesh.has_velocities()) {
+    s->velocity = vertex_velocity_field(*s->query);
+    s->velocity_source = "vertex";
+    if (o.velocity_band > 0) {
+      s->velocity = banded_velocity_field(std::move(s->velocity), s->mesh, o.velocity_voxel * mean_edge_length(s->mesh),
+                                          o.velocity_band);
+      s->velocity_source = "vertex (band of " + std::to_string(o.velocity_band) + " voxels)";
     }
-    if (o.min_speed > 0) s->velocity = with_min_speed(std::move(s->velocity), o.min_speed);
-    return s;
+  } else if (s->mesh.empty() || o.allow_zero_velocity) {
+    s->velocity = [](const Vec3&) { return Vec3{}; };
+    s->velocity_source = "zero";
+  } else {
+    throw InputError(s->path,
+                     "no per-vertex velocity (vx vy vz) and no --velocity-vdb; pass --allow-zero-velocity to bake a "
+                     "still texture",
+                     frame);
   }
+  if (o.min_speed > 0) s->velocity = with_min_speed(std::move(s->velocity), o.min_speed);
+  return s;
+}
 
-  std::string frame_file(const BakeOptions& o, const std::string& kind, int frame, const std::string& ext) {
-    char digits[16];
-    std::snprintf(digits, sizeof digits, "%04d", frame);
-    const std::string mid = kind.empty() ? "" : kind + ".";
-    return (fs::path(o.out_dir) / (o.name + "." + mid + digits + "." + ext)).string();
-  }
+std::string frame_file(const BakeOptions& o, const std::string& kind, int frame, const std::string& ext) {
+  char digits[16];
+  std::snprintf(digits, sizeof digits, "%04d", frame);
+  const std::string mid = kind.empty() ? "" : kind + ".";
+  return (fs::path(o.out_dir) / (o.name + "." + mid + digits + "." + ext)).string();
+}
 
-  nlohmann::json stats_json(const FrameStats& s) {
-    return {{"frame", s.frame},
-            {"triangles", s.triangles},
-            {"vertices", s.vertices},
-            {"velocity", s.velocity_source},
-            {"patches", {{"alive", s.patches_alive}, {"born", s.patches_born}, {"retired", s.patches_retired},
-                         {"lost", s.patches_lost}}},
-            {"patch_vertices_removed", s.patch_vertices_removed},
-            {"charts", s.charts},
-            {"utilization", s.utilization},
-            {"chart_texels", s.chart_texels},
-            {"coverage", s.coverage},
-            {"forced_texels", s.forced_texels},
-            {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"seed", s.seconds_seed},
-                         {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster}, {"write", s.seconds_write},
-                         {"total", s.seconds_total}}},
-            {"peak_rss_mb", s.peak_rss_mb}};
-  }
+nlohmann::json stats_json(const FrameStats& s) {
+  return {{"frame", s.frame},
+          {"triangles", s.triangles},
+          {"vertices", s.vertices},
+          {"velocity", s.velocity_source},
+          {"patches", {{"alive", s.patches_alive}, {"born", s.patches_born}, {"retired", s.patches_retired},
+                       {"lost", s.patches_lost}}},
+          {"patch_vertices_removed", s.patch_vertices_removed},
+          {"charts", s.charts},
+          {"utilization", s.utilization},
+          {"chart_texels", s.chart_texels},
+          {"coverage", s.coverage},
+          {"forced_texels", s.forced_texels},
+          {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"seed", s.seconds_seed},
+                       {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster}, {"write", s.seconds_write},
+                       {"total", s.seconds_total}}},
+          {"peak_rss_mb", s.peak_rss_mb}};
+}
 
-  /// Everything one frame's files are made of, owned by the writer.
-  struct FrameWrite {
-    FrameTextures textures;
-    SurfaceAtlas atlas;
-    std::shared_ptr<const SurfaceFrame> surface;
-    PatchSet patches;  ///< a copy, with dump_patches only
-  };
+/// Everything one frame's files are made of, owned by the writer.
+struct FrameWrite {
+  FrameTextures textures;
+  SurfaceAtlas atlas;
+  std::shared_ptr<const SurfaceFrame> surface;
+  PatchSet patches;  ///< a copy, with dump_patches only
+};
 
-  /// Writes frame f's files (each atomically), the independent ones
-  /// concurrently. Returns the seconds it took.
-  double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
-    const auto t = Clock::now();
-    const std::string color = frame_file(o, "color", f, "exr"), disp = frame_file(o, "disp", f, "exr");
-    std::vector<std::function<void()>> jobs;
-    jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
-    jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
-    if (o.aov)
-      jobs.push_back([&] {
-        write_exr(frame_file(o, "aov", f, "exr"), w.textures.aov, {"patch_id", "u", "v", "w"},
-                  {ExrPixelType::Float, o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression});
-      });
+/// Writes frame f's files (each atomically), the independent ones
+/// concurrently. Returns the seconds it took.
+double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
+  const auto t = Clock::now();
+  const std::string color = frame_file(o, "color", f, "exr"), disp = frame_file(o, "disp", f, "exr");
+  std::vector<std::function<void()>> jobs;
+  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
+  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
+  if (o.aov)
     jobs.push_back([&] {
-      UvMeshMaterial material;
-      material.name = o.name;
-      material.color_texture = fs::path(color).filename().string();
-      material.displacement_texture = fs::path(disp).filename().string();
-      write_uv_mesh_obj(frame_file(o, "", f, "obj"), w.surface->mesh, w.atlas, material);
+      // Data: float, and never lossy.
+      const ExrCompression lossless =
+          o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
+      write_exr(frame_file(o, "aov", f, "exr"), w.textures.aov, {"patch_id", "u", "v", "w"},
+                {ExrPixelType::Float, lossless});
     });
-    if (o.dump_patches) jobs.push_back([&] { write_patches_ply(frame_file(o, "patches", f, "ply"), w.patches); });
-    // Each job catches its own error; the first (in job order) is rethrown.
-    std::vector<std::exception_ptr> errors(jobs.size());
-    parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i) {
-        try {
-          jobs[i]();
-        } catch (...) {
-          errors[i] = std::current_exception();
-        }
-      }
-    }, 1);
-    for (const auto& e : errors)
-      if (e) std::rethrow_exception(e);
-    return seconds_since(t);
-  }
-
-  }  // namespace
-
-  void resolve_bake_options(BakeOptions& o) {
-    if (o.mesh_pattern.empty()) throw UsageError("--mesh is required (a per-frame PLY/OBJ pattern)");
-    if (o.out_dir.empty()) throw UsageError("--out is required");
-    if (o.exemplar_color.empty()) throw UsageError("--exemplar is required");
-    if (!(o.fps > 0)) throw UsageError("--fps must be positive");
-    o.advect.dt = 1.0 / o.fps;
-    o.patch.seed = o.seed;
-    if (o.patch.radius < 0) throw UsageError("--radius must be positive");
-    if (o.patch.radius == 0 || o.atlas.resolution == 0) {
-      // Automatic values come from the first frame's surface and the exemplar.
-      const FramePattern meshes(o.mesh_pattern);
-      const std::vector<int> frames = resolve_frames(meshes, o.frames);
-      TriMesh first;
+  jobs.push_back([&] {
+    UvMeshMaterial material;
+    material.name = o.name;
+    material.color_texture = fs::path(color).filename().string();
+    material.displacement_texture = fs::path(disp).filename().string();
+    write_uv_mesh_obj(frame_file(o, "", f, "obj"), w.surface->mesh, w.atlas, material);
+  });
+  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(frame_file(o, "patches", f, "ply"), w.patches); });
+  // Each job catches its own error; the first (in job order) is rethrown.
+  std::vector<std::exception_ptr> errors(jobs.size());
+  parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
       try {
-        first = read_mesh(meshes.path(frames.front()));
-      } catch (const InputError& e) {
-        throw e.with_frame(frames.front());
-      }
-      const double area = surface_area(first);
-      if (o.patch.radius == 0) {
-        // About 1500 patches on the first frame: small enough to follow the flow,
-        // large enough that each shows the exemplar's features.
-        o.patch.radius = area > 0 ? std::sqrt(area / 1500.0) : 0.05;
-      }
-      if (o.atlas.resolution == 0) {
-        // One atlas texel per exemplar texel: the exemplar spans 2r over its
-        // width; charts fill about 65% of the atlas.
-        const Image probe = read_image(o.exemplar_color);
-        const double texel = 2 * o.patch.radius / std::max(1, probe.width);
-        const double n = std::sqrt(std::max(area, 1e-12) / 0.65) / texel;
-        o.atlas.resolution = int(std::clamp(std::ceil(n / 256.0) * 256.0, 512.0, 4096.0));
+        jobs[i]();
+      } catch (...) {
+        errors[i] = std::current_exception();
       }
     }
-    if (o.atlas.resolution < 16 || o.atlas.resolution > 32768)
-      throw UsageError("--resolution must be between 16 and 32768 texels");
-    o.raster.radius = o.patch.radius;
-    o.raster.aov = o.aov;
-    o.raster.gutter = o.atlas.gutter;
-  }
+  }, 1);
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  return seconds_since(t);
+}
 
-  void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
+}  // namespace
+
+void resolve_bake_options(BakeOptions& o) {
+  if (o.mesh_pattern.empty()) throw UsageError("--mesh is required (a per-frame PLY/OBJ pattern)");
+  if (o.out_dir.empty()) throw UsageError("--out is required");
+  if (o.exemplar_color.empty()) throw UsageError("--exemplar is required");
+  if (!(o.fps > 0)) throw UsageError("--fps must be positive");
+  o.advect.dt = 1.0 / o.fps;
+  o.patch.seed = o.seed;
+  if (o.patch.radius < 0) throw UsageError("--radius must be positive");
+  if (o.patch.radius == 0 || o.atlas.resolution == 0) {
+    // Automatic values come from the first frame's surface and the exemplar.
     const FramePattern meshes(o.mesh_pattern);
     const std::vector<int> frames = resolve_frames(meshes, o.frames);
-    const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
-    const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
-    std::error_code ec;
-    fs::create_directories(o.out_dir, ec);
-    if (ec) throw OutputError(o.out_dir + ": cannot create the output folder: " + ec.message());
-
-    PatchSet patches;
-    std::shared_ptr<SurfaceFrame> prev;
-    std::string stats_text;
-    const std::string stats_path = (fs::path(o.out_dir) / (o.name + ".stats.jsonl")).string();
-    write_bake_manifest(make_bake_manifest(o, frames), bake_manifest_path(o.out_dir, o.name));
-
-    // The frame being written in the background, if any.
-    std::future<double> pending;
-    FrameStats pending_stats;
-    double loop_seconds = 0;  // wall time of the frame loop iteration that computed the pending frame
-    auto finish_pending = [&] {
-      if (!pending.valid()) return;
-      const auto t_wait = Clock::now();
-      pending_stats.seconds_write = pending.get();  // rethrows a write error
-      // Wall time the frame cost the bake: its computation plus the wait for
-      // its files beyond the next frame's computation (frames sum to the bake).
-      pending_stats.seconds_total = loop_seconds + seconds_since(t_wait);
-      pending_stats.peak_rss_mb = peak_rss_mb();
-      stats_text += stats_json(pending_stats).dump() + "\n";
-      write_text_atomically(stats_path, stats_text);
-      if (on_frame) on_frame(pending_stats);
-    };
-
+    TriMesh first;
     try {
-    for (const int f : frames) {
+      first = read_mesh(meshes.path(frames.front()));
+    } catch (const InputError& e) {
+      throw e.with_frame(frames.front());
+    }
+    const double area = surface_area(first);
+    if (o.patch.radius == 0) {
+      // About 1500 patches on the first frame: small enough to follow the flow,
+      // large enough that each shows the exemplar's features.
+      o.patch.radius = area > 0 ? std::sqrt(area / 1500.0) : 0.05;
+    }
+    if (o.atlas.resolution == 0) {
+      // One atlas texel per exemplar texel: the exemplar spans 2r over its
+      // width; charts fill about 65% of the atlas.
+      const Image probe = read_image(o.exemplar_color);
+      const double texel = 2 * o.patch.radius / std::max(1, probe.width);
+      const double n = std::sqrt(std::max(area, 1e-12) / 0.65) / texel;
+      o.atlas.resolution = int(std::clamp(std::ceil(n / 256.0) * 256.0, 512.0, 4096.0));
+    }
+  }
+  if (o.atlas.resolution < 16 || o.atlas.resolution > 32768)
+    throw UsageError("--resolution must be between 16 and 32768 texels");
+  o.raster.radius = o.patch.radius;
+  o.raster.aov = o.aov;
+  o.raster.gutter = o.atlas.gutter;
+}
+
+void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
+  const FramePattern meshes(o.mesh_pattern);
+  const std::vector<int> frames = resolve_frames(meshes, o.frames);
+  const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
+  const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
+  std::error_code ec;
+  fs::create_directories(o.out_dir, ec);
+  if (ec) throw OutputError(o.out_dir + ": cannot create the output folder: " + ec.message());
+
+  PatchSet patches;
+  std::shared_ptr<SurfaceFrame> prev;
+  std::string stats_text;
+  const std::string stats_path = (fs::path(o.out_dir) / (o.name + ".stats.jsonl")).string();
+  write_bake_manifest(make_bake_manifest(o, frames), bake_manifest_path(o.out_dir, o.name));
+
+  // The frame being written in the background, if any.
+  std::future<double> pending;
+  FrameStats pending_stats;
+  double loop_seconds = 0;  // wall time of the frame loop iteration that computed the pending frame
+  auto finish_pending = [&] {
+    if (!pending.valid()) return;
+    const auto t_wait = Clock::now();
+    pending_stats.seconds_write = pending.get();  // rethrows a write error
+    // Wall time the frame cost the bake: its computation plus the wait for
+    // its files beyond the next frame's computation (frames sum to the bake).
+    pending_stats.seconds_total = loop_seconds + seconds_since(t_wait);
+    pending_stats.peak_rss_mb = peak_rss_mb();
+    stats_text += stats_json(pending_stats).dump() + "\n";
+    write_text_atomically(stats_path, stats_text);
+    if (on_frame) on_frame(pending_stats);
+  };
+
+  try {
+    // The next frame is read (mesh, Embree scene, velocity band) on another
+    // thread while this one computes; its errors surface in frame order.
+    std::future<std::shared_ptr<SurfaceFrame>> next;
+    auto start_reading = [&](std::size_t i) {
+      if (i < frames.size())
+        next = std::async(std::launch::async, [&o, &meshes, f = frames[i]] {
+          return std::shared_ptr<SurfaceFrame>(load_frame(o, meshes, f));
+        });
+    };
+    start_reading(0);
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const int f = frames[i];
       FrameStats st;
       st.frame = f;
       const auto t_frame = Clock::now();
       auto t = Clock::now();
-      std::shared_ptr<SurfaceFrame> cur = load_frame(o, meshes, f);
-      st.seconds_read = seconds_since(t);
+      std::shared_ptr<SurfaceFrame> cur = next.get();
+      start_reading(i + 1);
+      st.seconds_read = seconds_since(t);  // the wait for the frame read in the background
       st.triangles = cur->mesh.triangle_count();
       st.vertices = cur->mesh.vertex_count();
       st.velocity_source = cur->velocity_source;
