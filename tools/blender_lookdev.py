@@ -266,7 +266,7 @@ def add_ground(scene, lo, hi):
     mat = bpy.data.materials.new("ground")
     mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Base Color"].default_value = (0.32, 0.32, 0.3, 1.0)
+    bsdf.inputs["Base Color"].default_value = (0.12, 0.12, 0.115, 1.0)
     bsdf.inputs["Roughness"].default_value = 0.9
     ground.data.materials.append(mat)
 
@@ -281,16 +281,22 @@ def add_camera(scene, args, lo, hi):
     target = parse_vec(args.target, "--target") if args.target else centre
     radius = max((hi - lo).length / 2, 1e-6)
     if args.camera == "auto":
-        # From the front-right, above: the classic three-quarter lookdev view.
+        # From the front-right, above: the classic three-quarter lookdev view,
+        # as close as the eight corners of the box allow.
         direction = Vector((0.55, -1.0, 0.65)).normalized()
+        right = direction.cross(Vector((0, 0, 1))).normalized() * -1
+        up = right.cross(direction) * -1
         w, h = args.size
-        half_fov = math.atan(0.5 * cam_data.sensor_width / cam_data.lens)  # along the wider side
-        if w < h:
-            half_fov = math.atan(math.tan(half_fov) * w / h)
-        elif h < w:
-            half_fov = math.atan(math.tan(half_fov) * h / w)
-        distance = 1.05 * radius / math.sin(half_fov)
-        position = target + direction * distance
+        tan_wide = 0.5 * cam_data.sensor_width / cam_data.lens  # the sensor fits the wider side
+        tan_x, tan_y = (tan_wide, tan_wide * h / w) if w >= h else (tan_wide * w / h, tan_wide)
+        distance = 0.0
+        for cx in (lo.x, hi.x):
+            for cy in (lo.y, hi.y):
+                for cz in (lo.z, hi.z):
+                    c = Vector((cx, cy, cz)) - target
+                    depth = c.dot(direction)
+                    distance = max(distance, depth + abs(c.dot(right)) / tan_x, depth + abs(c.dot(up)) / tan_y)
+        position = target + direction * (1.08 * distance)
     else:
         position = parse_vec(args.camera, "--camera")
     cam.location = position
