@@ -1,0 +1,112 @@
+#pragma once
+/// \file eval.hpp Quality metrics of a bake (`lapflow eval`, docs/eval.md):
+/// coverage, contrast (ghosting), fidelity to the exemplar, agreement of the
+/// texture's motion with the input velocity, popping, drift at rest and
+/// distortion, per frame and over the sequence. Everything is measured from
+/// the files of a bake folder (NAME.bake.json, UV meshes, colour atlases, the
+/// AOVs of `bake --aov`, NAME.stats.jsonl) and the input meshes the manifest
+/// names. Deterministic at any thread count.
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/mesh_io.hpp"
+
+namespace lapflow {
+
+struct EvalOptions {
+  std::string exemplar;               ///< colour exemplar; empty = the one the bake used (manifest)
+  std::optional<FrameRange> frames;   ///< default: every frame of the bake
+  std::optional<double> min_speed;    ///< m/s: rest threshold of the drift metric (default: the bake's --min-speed)
+  int windows = 16384;                ///< 5x5 windows per side sampled for the sliced Wasserstein distance
+  int projections = 64;               ///< random unit directions of the sliced Wasserstein distance
+  uint64_t seed = 1;                  ///< seed of those directions
+};
+
+constexpr double kNoValue = std::numeric_limits<double>::quiet_NaN();
+
+/// Metrics of one frame. Values that need a previous frame (flow, popping,
+/// drift) or samples that a frame does not have are NaN ("no value").
+struct FrameMetrics {
+  int frame = 0;
+  // Coverage: chart texels (centre inside a UV-mesh triangle) with a patch.
+  std::size_t chart_texels = 0, covered_texels = 0;
+  double coverage = kNoValue;
+  // Scale: metres per atlas texel (sqrt(surface area / chart texel area)) and
+  // exemplar pixels per atlas texel (exemplar width * texel / 2r).
+  double texel_world_size = kNoValue, exemplar_scale = kNoValue;
+  // Contrast: area-weighted std of linear luminance over covered texels /
+  // the std of the exemplar seen at the atlas texel scale.
+  double luminance_std = kNoValue, exemplar_luminance_std = kNoValue, contrast = kNoValue;
+  // Fidelity: W1 between the area-weighted R, G, B distributions of the
+  // surface and the exemplar's (1024 bins on [0,1]), their mean, and the
+  // sliced W1 between 5x5 luminance windows of the surface and the exemplar.
+  std::array<double, 3> histogram_w1{kNoValue, kNoValue, kNoValue};
+  double histogram_distance = kNoValue;
+  double sliced_wasserstein = kNoValue;
+  std::size_t surface_windows = 0;
+  // Flow agreement: |d - v dt| / (|v| dt) over texels matched to the previous
+  // frame through (patch_id, u, v) where |v| dt >= one texel.
+  std::size_t flow_texels = 0;
+  double flow_median = kNoValue, flow_p90 = kNoValue;
+  // Popping: area share of compared texels whose patch differs from the patch
+  // found at the back-advected point on the previous frame.
+  std::size_t popping_texels = 0;
+  double popping = kNoValue;
+  std::optional<std::size_t> born, died;  ///< from NAME.stats.jsonl (died = retired + lost)
+  // Drift at rest: share of texels with |v| <= min_speed whose texture
+  // (patch, or (u,v) by more than half a texel) differs from the previous frame's at that point.
+  std::size_t rest_texels = 0;
+  double drift = kNoValue;
+  // Distortion: delta = max(s1, 1/s2) of the map (u,v)*2r -> surface,
+  // estimated from neighbouring texels of one patch and chart.
+  std::size_t distortion_texels = 0;
+  double distortion_median = kNoValue, distortion_p90 = kNoValue, distortion_max = kNoValue;
+  double seconds = 0;
+};
+
+/// One metric over the frames where it has a value.
+struct MetricSummary {
+  std::string key;  ///< as in the JSON (e.g. "contrast", "flow_median")
+  std::size_t frames = 0;
+  double mean = kNoValue, median = kNoValue, max = kNoValue;
+};
+
+struct EvalReport {
+  std::string dir, name, mode, exemplar;
+  int resolution = 0;
+  double radius = 0, fps = 0, rest_speed = 0;
+  double exemplar_luminance_std = 0;  ///< at the exemplar's own resolution
+  std::vector<FrameMetrics> frames;
+  std::vector<MetricSummary> summary;
+  std::size_t born = 0, died = 0;  ///< over the evaluated frames
+};
+
+/// Evaluates the bake in `dir` (a folder with one NAME.bake.json, or the
+/// manifest itself). Throws InputError naming the folder when the bake has no
+/// AOVs (bake with --aov), and naming the file for any missing or malformed
+/// file. `on_frame` is called after each frame.
+EvalReport evaluate_bake(const std::string& dir, const EvalOptions& options = {},
+                         const std::function<void(const FrameMetrics&)>& on_frame = {});
+
+/// Mean, median and max of every metric over the frames (fills report.summary).
+std::vector<MetricSummary> summarize_metrics(const std::vector<FrameMetrics>& frames);
+
+/// The report as JSON: settings, "frames" (one object per frame), "summary"
+/// (per metric: frames, mean, median, max). NaN is written as null.
+std::string eval_report_json(const EvalReport& report);
+/// A table for a terminal: one row per frame, then the summary.
+std::string eval_report_table(const EvalReport& report);
+
+/// Writes one PNG per metric over the frames into `dir` (created) with
+/// gnuplot (Debian package gnuplot-nox): coverage.png, contrast.png,
+/// fidelity.png, sliced_wasserstein.png, flow.png, popping.png, drift.png,
+/// distortion.png. Returns the paths written. Throws OutputError when gnuplot
+/// is missing or fails.
+std::vector<std::string> write_eval_plots(const EvalReport& report, const std::string& dir);
+
+}  // namespace lapflow
