@@ -84,16 +84,16 @@ def parse_frames(text, available):
         return [available[0]]
     frames = []
     for part in text.split(","):
-        part = part.strip()
         try:
-            if "-" in part[1:]:
-                a, b = part.split("-", 1) if not part.startswith("-") else (part, "")
-                a, b = int(a), int(b)
-                frames += list(range(a, b + 1)) if a <= b else []
+            if "-" in part:
+                a, b = (int(x) for x in part.split("-", 1))
+                if a > b:
+                    raise ValueError
+                frames += list(range(a, b + 1))
             else:
                 frames.append(int(part))
         except ValueError:
-            raise BadInput(f"--frames {text}: expected 1,10,20 or A-B")
+            raise BadInput(f"--frames {text}: expected 1,10,20 or A-B with A <= B")
     missing = [f for f in frames if f not in available]
     if missing:
         raise BadInput(f"--frames: frame(s) {missing} were not baked (the bake has {available[0]}-{available[-1]})")
