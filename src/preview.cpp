@@ -1,1 +1,160 @@
-// preview: being written (issue 6).
+// `lapflow preview`: reading a bake's frames, framing the camera, putting
+// panels side by side. The renderer is in preview_render.cpp, the labels in
+// preview_label.cpp, the video in preview_video.cpp.
+#include "lapflow/preview.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+#include <stdexcept>
+
+#include "lapflow/errors.hpp"
+#include "lapflow/mesh.hpp"
+
+namespace lapflow {
+namespace fs = std::filesystem;
+
+PreviewFrame make_preview_frame(UvMesh mesh, const Image& color, const Image& displacement, double radius) {
+  PreviewFrame f;
+  f.mesh = std::move(mesh);
+  f.normals = vertex_normals(f.mesh.mesh);
+  f.radius = radius;
+  if (!color.empty()) {
+    Exemplar ex;
+    ex.color = color;
+    if (!displacement.empty()) {
+      ex.displacement = displacement.width == color.width && displacement.height == color.height
+                            ? displacement
+                            : resize_image(displacement, color.width, color.height);
+      f.bump = true;
+    }
+    f.texture = build_exemplar_mips(ex);
+  }
+  return f;
+}
+
+PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
+  const std::string obj = bake.frame_file("obj", frame), color = bake.frame_file("color", frame),
+                    disp = bake.frame_file("disp", frame);
+  std::error_code ec;
+  if (!fs::exists(obj, ec)) throw InputError(obj, "missing: the bake has no mesh for this frame", frame);
+  if (!fs::exists(color, ec)) throw InputError(color, "missing: the bake has no colour atlas for this frame", frame);
+  UvMesh mesh = read_uv_mesh(obj);
+  if (mesh.corner_uv.empty() && !mesh.mesh.empty())
+    throw InputError(obj, "no texture coordinates (vt): not a lapflow bake frame", frame);
+  const Image c = read_image(color, ColorSpace::Linear);
+  if (c.channels < 3) throw InputError(color, "the colour atlas needs R, G, B channels", frame);
+  Image h;
+  if (fs::exists(disp, ec)) {
+    h = read_image(disp, ColorSpace::Linear);
+    if (h.channels != 1) {  // keep the first channel
+      Image one(h.width, h.height, 1);
+      for (std::size_t i = 0; i < one.pixels.size(); ++i) one.pixels[i] = h.pixels[i * h.channels];
+      h = std::move(one);
+    }
+  }
+  return make_preview_frame(std::move(mesh), c, h, bake.radius);
+}
+
+Box3 preview_bounds(const BakeManifest& bake, const std::vector<int>& frames) {
+  Box3 box;
+  for (int f : frames) {
+    const std::string obj = bake.frame_file("obj", f);
+    std::error_code ec;
+    if (!fs::exists(obj, ec)) throw InputError(obj, "missing: the bake has no mesh for this frame", f);
+    const Box3 b = bounding_box(read_uv_mesh(obj).mesh);
+    if (!b.empty()) {
+      box.extend(b.lo);
+      box.extend(b.hi);
+    }
+  }
+  return box;
+}
+
+PreviewCamera frame_camera(const Box3& box_in, const Vec3& up_in, double aspect, double azimuth, double elevation,
+                           double fov) {
+  Box3 box = box_in;
+  if (box.empty()) {
+    box.extend({-0.5, -0.5, -0.5});
+    box.extend({0.5, 0.5, 0.5});
+  }
+  const Vec3 up = norm(up_in) > 0 ? normalized(up_in) : Vec3{0, 0, 1};
+  // The "front" of the scene: -Y for a Z-up world (Blender), +Z for a Y-up one (Houdini, Maya).
+  Vec3 front = std::abs(up.z) > 0.5 ? Vec3{0, -1, 0} : Vec3{0, 0, 1};
+  front = normalized(front - up * dot(front, up));
+  const Vec3 side = cross(up, front);
+  const double az = azimuth * std::numbers::pi / 180, el = elevation * std::numbers::pi / 180;
+  const Vec3 to_eye = normalized((front * std::cos(az) + side * std::sin(az)) * std::cos(el) + up * std::sin(el));
+
+  PreviewCamera cam;
+  cam.up = up;
+  cam.fov = fov;
+  cam.target = box.center();
+  const Vec3 forward = -to_eye;
+  Vec3 right = cross(forward, up);
+  if (norm(right) < 1e-9) right = std::abs(up.x) < 0.9 ? cross(forward, Vec3{1, 0, 0}) : cross(forward, Vec3{0, 1, 0});
+  right = normalized(right);
+  const Vec3 cam_up = cross(right, forward);
+  const double tan_v = std::tan(0.5 * fov * std::numbers::pi / 180) * 0.9;  // 10% margin
+  const double tan_h = tan_v * aspect;
+  // Smallest distance d at which every corner projects inside the margin:
+  // a corner at offset (x, y, z) in the camera frame is at depth d + z.
+  double d = 0;
+  for (int k = 0; k < 8; ++k) {
+    const Vec3 corner{(k & 1) ? box.hi.x : box.lo.x, (k & 2) ? box.hi.y : box.lo.y, (k & 4) ? box.hi.z : box.lo.z};
+    const Vec3 q = corner - cam.target;
+    const double x = dot(q, right), y = dot(q, cam_up), z = dot(q, forward);
+    d = std::max({d, std::abs(x) / tan_h - z, std::abs(y) / tan_v - z});
+  }
+  d = std::max(d, 1e-3 + 0.5 * norm(box.size()));
+  cam.eye = cam.target + to_eye * d;
+  return cam;
+}
+
+Image side_by_side(const std::vector<Image>& panels, int gap, const Vec3& gap_color) {
+  if (panels.empty()) throw std::invalid_argument("side_by_side: no panels");
+  const int w = panels[0].width, h = panels[0].height, ch = panels[0].channels;
+  for (const Image& p : panels)
+    if (p.width != w || p.height != h || p.channels != ch)
+      throw std::invalid_argument("side_by_side: panels differ in size");
+  const int n = int(panels.size());
+  Image out(n * w + (n - 1) * gap, h, ch);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < out.width; ++x) {
+      const int i = x / (w + gap), px = x - i * (w + gap);
+      for (int c = 0; c < ch; ++c)
+        out.at(x, y, c) = px < w ? panels[i].at(px, y, c) : float(c < 3 ? gap_color[c] : 1.0);
+    }
+  return out;
+}
+
+std::vector<int> preview_frames(const BakeManifest& bake, const std::optional<FrameRange>& range,
+                                std::vector<int>* missing) {
+  std::vector<int> frames;
+  std::error_code ec;
+  if (range) {
+    if (range->last < range->first)
+      throw UsageError("--frames " + std::to_string(range->first) + "-" + std::to_string(range->last) +
+                       ": the range is empty");
+    for (int f = range->first; f <= range->last; ++f) {
+      const std::string obj = bake.frame_file("obj", f);
+      if (std::find(bake.frames.begin(), bake.frames.end(), f) == bake.frames.end() || !fs::exists(obj, ec))
+        throw InputError(obj, "missing: frame " + std::to_string(f) + " is not in this bake", f);
+      frames.push_back(f);
+    }
+    return frames;
+  }
+  for (int f : bake.frames) {
+    if (fs::exists(bake.frame_file("obj", f), ec))
+      frames.push_back(f);
+    else if (missing)
+      missing->push_back(f);
+  }
+  if (frames.empty())
+    throw InputError(bake.frames.empty() ? bake_manifest_path(bake.dir, bake.name) : bake.frame_file("obj", bake.frames[0]),
+                     "missing: the bake has no frame on disk");
+  return frames;
+}
+
+}  // namespace lapflow

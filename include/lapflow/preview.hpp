@@ -1,0 +1,131 @@
+#pragma once
+/// \file preview.hpp `lapflow preview`: ray-traced pictures of baked frames
+/// (Embree behind it), the first thing a user looks at. A frame's UV mesh is
+/// shaded with its colour atlas, its displacement atlas as bump, a key light
+/// with soft ray-traced shadows, a sky fill, a little liquid specular and a
+/// ground plane; several bakes of one sequence can be put side by side.
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lapflow/bake_manifest.hpp"
+#include "lapflow/image.hpp"
+#include "lapflow/mesh_io.hpp"
+#include "lapflow/raster.hpp"
+#include "lapflow/vec.hpp"
+
+namespace lapflow {
+
+/// A pinhole camera.
+struct PreviewCamera {
+  Vec3 eye{0, -3, 1}, target{0, 0, 0};
+  Vec3 up{0, 0, 1};  ///< world up; the picture's vertical follows it
+  double fov = 30;   ///< vertical field of view, degrees
+};
+
+/// How a picture is lit and shaded. Colours are linear RGB.
+///
+/// A surface point with albedo a (the colour atlas), shading normal n (the
+/// interpolated vertex normal bent by the bump), view direction v (towards the
+/// eye) and light direction l gets, with F = 0.02 + 0.98 (1 - n.v)^5 (Schlick,
+/// water) times `reflection`, s the key light's visible fraction (shadow rays)
+/// and h = normalize(l + v):
+///
+///   a (1 - F) [ key s max(0, n.l) + ambient lerp(ground_fill, sky_fill, (1 + n.up) / 2) ]
+///   + key s specular (shininess + 8) / (8 pi) max(0, n.h)^shininess  (only where n.l > 0)
+///   + F env(reflect(-v, n))
+///
+/// The background is sky(d) = lerp(horizon, zenith, sqrt(max(0, d.up))) for a
+/// ray direction d, or the ground plane (grey, lit the same way, shadowed,
+/// fading into the horizon colour far away). env(d) is sky(d) above the
+/// horizon and fades to the ground's unshadowed colour below it.
+struct PreviewLook {
+  Vec3 up{0, 0, 1};       ///< world up: sky, ambient and the ground plane's normal
+  Vec3 light_dir{0, 0, 0};  ///< towards the key light; zero = from the camera's upper left (follows the camera)
+  Vec3 key{1.75, 1.66, 1.52};  ///< key light irradiance on a surface facing it
+  double light_angle = 2.5;     ///< angular radius of the key light, degrees (soft shadows); 0 = hard
+  Vec3 sky_fill{0.36, 0.40, 0.48}, ground_fill{0.13, 0.12, 0.11};
+  double ambient = 1.0;
+  double specular = 0.25, shininess = 80;
+  double reflection = 0.6;  ///< weight of the Fresnel sky reflection (0 = off)
+  Vec3 zenith{0.16, 0.22, 0.33}, horizon{0.55, 0.58, 0.63};
+  bool ground = true;       ///< a ground plane under the sequence's bounding box
+  Vec3 ground_albedo{0.30, 0.30, 0.30};
+  double bump = 0.05;       ///< bump height: displacement 1 = bump * radius (metres); 0 = no bump
+};
+
+struct PreviewOptions {
+  int width = 1280, height = 720;
+  int samples = 4;  ///< jittered samples per pixel (deterministic); a square number is stratified
+  PreviewLook look;
+};
+
+/// One baked frame in memory, ready to render.
+struct PreviewFrame {
+  UvMesh mesh;
+  std::vector<Vec3> normals;  ///< per vertex (smooth shading)
+  ExemplarMips texture;       ///< mip pyramid of the atlas: R, G, B (linear) and displacement H
+  bool bump = false;          ///< false when the bake had no displacement atlas
+  double radius = 0;          ///< patch radius of the bake (metres), the bump's unit
+};
+
+/// A frame from its parts: `color` is the RGB(A) linear atlas, `displacement`
+/// one channel in exemplar units (empty: no bump; resampled to the colour
+/// atlas' size when it differs).
+PreviewFrame make_preview_frame(UvMesh mesh, const Image& color, const Image& displacement, double radius);
+
+/// Reads frame `frame` of a bake: NAME.N.obj, NAME.color.N.exr and
+/// NAME.disp.N.exr (the latter optional: no bump when it is missing). Throws
+/// InputError naming the missing or malformed file.
+PreviewFrame load_preview_frame(const BakeManifest& bake, int frame);
+
+/// Bounding box of the frames' meshes (reads the OBJ vertices only). Throws
+/// InputError naming a missing or malformed file.
+Box3 preview_bounds(const BakeManifest& bake, const std::vector<int>& frames);
+
+/// A 3/4 elevated view of `box`: looking at its centre from `azimuth` degrees
+/// about `up` (0 = from the -Y side for a Z-up world, from +Z for Y-up) and
+/// `elevation` degrees above the horizon, at the distance where the whole box
+/// fits the picture (aspect = width / height) with a small margin.
+PreviewCamera frame_camera(const Box3& box, const Vec3& up, double aspect, double azimuth = -35,
+                           double elevation = 28, double fov = 30);
+
+/// Renders one frame. `bounds` is the bounding box of the whole sequence: it
+/// places the ground plane and sizes the shadow and fade distances, so that
+/// they do not change from frame to frame. The result is linear RGB.
+/// Deterministic: the same bytes at any thread count.
+Image render_preview(const PreviewFrame& frame, const PreviewCamera& camera, const Box3& bounds,
+                     const PreviewOptions& options);
+
+/// Draws `text` (white on a translucent dark box) `size` pixels high with the
+/// TrueType font `font_path` into a linear RGB image: the box's top-left
+/// corner at pixel (x, y), or its top-right corner when `align_right`.
+/// Returns false (and draws nothing) when the font cannot be loaded.
+bool draw_label(Image& img, int x, int y, const std::string& text, int size, const std::string& font_path,
+                bool align_right = false);
+
+/// The font labels are drawn with: $LAPFLOW_FONT when set, else DejaVu Sans
+/// (Debian's fonts-dejavu-core).
+std::string default_label_font();
+
+/// Puts equally sized panels side by side (left to right), each `gap` pixels
+/// apart (filled with `gap_color`, linear).
+Image side_by_side(const std::vector<Image>& panels, int gap = 0, const Vec3& gap_color = {0.05, 0.05, 0.05});
+
+/// The frames of a bake to preview: all of `range` (each must be one of the
+/// bake's frames and its OBJ must exist, else InputError naming the file), or
+/// else every frame of the manifest whose OBJ is on disk (InputError when none).
+/// `missing` receives the manifest's frames skipped for lack of files.
+std::vector<int> preview_frames(const BakeManifest& bake, const std::optional<FrameRange>& range,
+                                std::vector<int>* missing = nullptr);
+
+/// Encodes PNG pictures (in order, same size) into an H.264 MP4 (yuv420p,
+/// dimensions padded to even) with the `ffmpeg` program, written atomically.
+/// Throws OutputError when ffmpeg fails.
+void encode_video(const std::vector<std::string>& pngs, const std::string& mp4_path, double fps);
+
+/// True when an `ffmpeg` program is on PATH.
+bool ffmpeg_available();
+
+}  // namespace lapflow
