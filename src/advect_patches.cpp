@@ -133,9 +133,8 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
         uv.push_back(patch.rest_uv[v]);
         st.push_back(mv[v].triangle);
         const Tri& f = mesh.triangles[mv[v].triangle];
-        double b1, b2;
-        const Vec3 q = detail::closest_point_on_triangle(mv[v].position, mesh.positions[f[0]], mesh.positions[f[1]],
-                                                         mesh.positions[f[2]], b1, b2);
+        const Vec3 q =
+            closest_point_on_triangle(mv[v].position, mesh.positions[f[0]], mesh.positions[f[1]], mesh.positions[f[2]]).point;
         per_patch[i].residual = std::max(per_patch[i].residual, norm(q - mv[v].position));
       }
       per_patch[i].removed_v = n - pos.size();

@@ -14,38 +14,6 @@
 namespace lapflow {
 namespace detail {
 
-Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double& b1, double& b2) {
-  // Ericson, Real-Time Collision Detection 5.1.5: Voronoi regions of the triangle.
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return b1 = 0, b2 = 0, a;
-  const Vec3 bp = p - b;
-  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) return b1 = 1, b2 = 0, b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double v = d1 / (d1 - d3);
-    return b1 = v, b2 = 0, a + ab * v;
-  }
-  const Vec3 cp = p - c;
-  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return b1 = 0, b2 = 1, c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double w = d2 / (d2 - d6);
-    return b1 = 0, b2 = w, a + ac * w;
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return b1 = 1 - w, b2 = w, b + (c - b) * w;
-  }
-  const double sum = va + vb + vc;
-  if (!(sum > 0)) return b1 = 0, b2 = 0, a;  // degenerate triangle
-  const double v = vb / sum, w = vc / sum;
-  return b1 = v, b2 = w, a + ab * v + ac * w;
-}
-
 void split_nonmanifold_vertices(PatchMesh& mesh) {
   const std::size_t nt = mesh.triangles.size();
   // Corners (t, k) around the same vertex are in one fan when their triangles
@@ -117,9 +85,7 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     const Tri& f = fluid.triangles[t];
     const Vec3 n = triangle_normal_area2(fluid, t);
     if (!(dot(n, n_p) > 0)) return false;
-    double b1, b2;
-    const Vec3 q = detail::closest_point_on_triangle(p, fluid.positions[f[0]], fluid.positions[f[1]],
-                                                     fluid.positions[f[2]], b1, b2);
+    const Vec3 q = closest_point_on_triangle(p, fluid.positions[f[0]], fluid.positions[f[1]], fluid.positions[f[2]]).point;
     return norm2(q - p) <= r2;
   };
   std::unordered_set<uint64_t> directed;  // directed edges already in the patch
@@ -179,8 +145,7 @@ void trim_to_ball(PatchMesh& m, const Vec3& p, double r) {
   int nearest = -1;
   for (std::size_t t = 0; t < nt; ++t) {
     const Tri& f = m.triangles[t];
-    double b1, b2;
-    dist[t] = norm(detail::closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]], b1, b2) - p);
+    dist[t] = norm(closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]]).point - p);
     if (nearest < 0 || dist[t] < dist[nearest]) nearest = int(t);
   }
   if (nearest < 0) return;
@@ -310,9 +275,9 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
     const Vec3 &a = mesh.positions[f[0]], &b = mesh.positions[f[1]], &c = mesh.positions[f[2]];
     area3 += 0.5 * norm(cross(b - a, c - a));
     area_uv += 0.5 * cross(uv[f[1]] - uv[f[0]], uv[f[2]] - uv[f[0]]);
-    double b1, b2;
-    const double d = norm2(detail::closest_point_on_triangle(at.position, a, b, c, b1, b2) - at.position);
-    if (d < best) best = d, host = t, hb1 = b1, hb2 = b2;
+    const TrianglePoint q = closest_point_on_triangle(at.position, a, b, c);
+    const double d = norm2(q.point - at.position);
+    if (d < best) best = d, host = t, hb1 = q.b1, hb2 = q.b2;
   }
   if (host < 0 || !(area_uv > 0) || !(area3 > 0)) return std::nullopt;
   const Tri& hf = mesh.triangles[host];

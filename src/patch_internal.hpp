@@ -45,9 +45,6 @@ bool cgal_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
 /// Requires every edge to have at most two consistently oriented triangles.
 void split_nonmanifold_vertices(PatchMesh& mesh);
 
-/// Closest point on triangle (a,b,c) to p, as barycentric (of b and c).
-Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double& b1, double& b2);
-
 /// Per-triangle distortion of the map rest uv (scaled by `scale`) -> 3D:
 /// singular values s1 >= s2 of its Jacobian; returns delta = max(s1, 1/s2),
 /// +inf when either triangle is degenerate.

@@ -15,27 +15,9 @@
 #include "lapflow/errors.hpp"
 
 namespace lapflow {
-namespace {
 
-RTCDevice shared_device() {
-  // One device for the process: devices are thread-safe and costly to create.
-  static RTCDevice device = [] {
-    RTCDevice d = rtcNewDevice(nullptr);
-    if (!d) throw std::runtime_error("Embree: cannot create a device");
-    return d;
-  }();
-  return device;
-}
-
-struct TriangleHit {
-  Vec3 point;
-  double b1, b2;
-};
-
-// Closest point on triangle (a, b, c) to p with its barycentrics (Ericson,
-// Real-Time Collision Detection, 5.1.5). Degenerate triangles fall through to
-// an edge or vertex region and still give a valid point.
-TriangleHit closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+TrianglePoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  // Voronoi regions of the triangle: vertices, then edges, then the face.
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
   const double d1 = dot(ab, ap), d2 = dot(ac, ap);
   if (d1 <= 0 && d2 <= 0) return {a, 0, 0};
@@ -60,10 +42,37 @@ TriangleHit closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     return {b + (c - b) * w, 1 - w, w};
   }
-  const double denom = va + vb + vc;
-  if (!(std::abs(denom) > 0)) return {a, 0, 0};
-  const double v = vb / denom, w = vc / denom;
+  // sum = |ab x ac|^2. When the corners are (nearly) collinear the signs
+  // above are rounding noise and the face formula divides by it: the
+  // closest point is then on one of the three edges.
+  const double sum = va + vb + vc;
+  if (!(sum > 1e-12 * dot(ab, ab) * dot(ac, ac))) {
+    auto on_segment = [&](const Vec3& s, const Vec3& e) {
+      const Vec3 d = e - s;
+      const double len2 = dot(d, d);
+      return len2 > 0 ? std::clamp(dot(p - s, d) / len2, 0.0, 1.0) : 0.0;
+    };
+    const double tab = on_segment(a, b), tac = on_segment(a, c), tbc = on_segment(b, c);
+    TrianglePoint best{a + ab * tab, tab, 0};
+    const TrianglePoint other[2] = {{a + ac * tac, 0, tac}, {b + (c - b) * tbc, 1 - tbc, tbc}};
+    for (const TrianglePoint& q : other)
+      if (norm2(q.point - p) < norm2(best.point - p)) best = q;
+    return best;
+  }
+  const double v = vb / sum, w = vc / sum;
   return {a + ab * v + ac * w, v, w};
+}
+
+namespace {
+
+RTCDevice shared_device() {
+  // One device for the process: devices are thread-safe and costly to create.
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    if (!d) throw std::runtime_error("Embree: cannot create a device");
+    return d;
+  }();
+  return device;
 }
 
 struct QueryState {
@@ -78,7 +87,7 @@ bool point_query_callback(RTCPointQueryFunctionArguments* args) {
   const int t = int(args->primID);
   const Tri& f = s->mesh->triangles[t];
   const auto& P = s->mesh->positions;
-  const TriangleHit h = closest_on_triangle(s->p, P[f[0]], P[f[1]], P[f[2]]);
+  const TrianglePoint h = closest_point_on_triangle(s->p, P[f[0]], P[f[1]], P[f[2]]);
   const double d2 = norm2(h.point - s->p);
   // Exact ties (shared edges and vertices) go to the lowest index so the
   // answer does not depend on BVH traversal order.

@@ -30,8 +30,7 @@ Vec3 point_at_uv(const Patch& p, const Vec2& q) {
 double brute_force_distance(const TriMesh& m, const Vec3& p) {
   double best = INFINITY;
   for (const Tri& f : m.triangles) {
-    double b1, b2;
-    const Vec3 q = detail::closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]], b1, b2);
+    const Vec3 q = closest_point_on_triangle(p, m.positions[f[0]], m.positions[f[1]], m.positions[f[2]]).point;
     best = std::min(best, norm(q - p));
   }
   return best;

@@ -15,6 +15,17 @@ struct ClosestHit {
   double distance = 0;  ///< |query - point| in metres
 };
 
+/// A point of a triangle with its barycentric coordinates of vertices 1 and 2.
+struct TrianglePoint {
+  Vec3 point;
+  double b1 = 0, b2 = 0;
+};
+
+/// Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision
+/// Detection 5.1.5). A degenerate triangle falls through to an edge or vertex
+/// region and still gives a point of the triangle.
+TrianglePoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
 struct RayHit {
   bool found = false;
   int triangle = -1;
