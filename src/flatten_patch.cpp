@@ -1,12 +1,13 @@
 // Least-squares conformal maps (Levy, Petitjean, Ray, Maillot 2002) solved
 // directly with Eigen. CGAL's LSCM_parameterizer_3 gives the same map (a test
 // checks it) but spends most of its time in set-up and its own CG solver; a
-// sparse Cholesky on the normal equations is several times faster on the
-// 100-1000 triangle patches lapflow creates by the thousand.
+// sparse Cholesky on the (complex, Hermitian) normal equations is several
+// times faster on the 100-1000 triangle patches lapflow creates by the thousand.
 #include <Eigen/Sparse>
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 
 #include "patch_internal.hpp"
 
@@ -70,15 +71,24 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
     uv_b = {norm(mesh.positions[pin_b] - mesh.positions[pin_a]), 0};
   }
 
-  // Unknowns: (u, v) of every free vertex.
+  // Complex form (Levy et al. 2002, section 3.3): z = u + i v per vertex. On
+  // a triangle with local coordinates q_j, the Cauchy-Riemann residual of the
+  // linear map is sum_j c_j z_j with c_j = i (q_{j+2} - q_{j+1}) / sqrt(2 d)
+  // (d twice the area), and its squared modulus is the conformal energy of
+  // the triangle. The normal equations M z = b, M = C^H C, are Hermitian with
+  // one unknown per free vertex: half the size of the real system, so the
+  // ordering and factorization are about 4x and 2x cheaper. M is assembled
+  // directly (lower triangle only, which is all SimplicialLDLT reads).
+  using Complex = std::complex<double>;
   std::vector<int> index(nv, -1);
   int nf = 0;
   for (int v = 0; v < nv; ++v)
     if (v != pin_a && v != pin_b) index[v] = nf++;
-  std::vector<Eigen::Triplet<double>> trip;
-  trip.reserve(mesh.triangles.size() * 12);
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(2 * mesh.triangles.size());
-  int row = 0;
+  std::vector<Eigen::Triplet<Complex>> trip;
+  trip.reserve(mesh.triangles.size() * 6 + nv);
+  Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(nf);
+  const Complex z_a(uv_a.x, uv_a.y), z_b(uv_b.x, uv_b.y);
+  int used = 0;
   for (const Tri& t : mesh.triangles) {
     const Vec3 &p0 = mesh.positions[t[0]], &p1 = mesh.positions[t[1]], &p2 = mesh.positions[t[2]];
     const Vec3 e1 = p1 - p0, e2 = p2 - p0;
@@ -86,48 +96,43 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
     const double d = norm(n);  // twice the area
     const double l1 = norm(e1);
     if (!(d > 1e-300) || !(l1 > 0)) continue;  // degenerate: no conformality to ask for
+    ++used;
     const Vec3 X = e1 / l1, Y = cross(n / d, X);
-    const Vec2 q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
-    // Cauchy-Riemann residuals of the linear map on this triangle, weighted
-    // so that their squares sum to the conformal energy (area * |residual|^2).
-    const double w = 1.0 / std::sqrt(2 * d);
+    const Complex q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
+    const Complex w(0, 1.0 / std::sqrt(2 * d));
+    Complex c[3], fixed = 0;
     for (int j = 0; j < 3; ++j) {
-      const Vec2 e = q[(j + 2) % 3] - q[(j + 1) % 3];
-      const double gx = -e.y * w, gy = e.x * w;  // gradient of the hat function, times d * w
-      const int v = t[j];
-      const double cu[2] = {gx, gy}, cv[2] = {-gy, gx};
-      for (int r = 0; r < 2; ++r) {
-        if (index[v] >= 0) {
-          trip.emplace_back(row + r, 2 * index[v], cu[r]);
-          trip.emplace_back(row + r, 2 * index[v] + 1, cv[r]);
-        } else {
-          const Vec2 fixed = v == pin_a ? uv_a : uv_b;
-          rhs[row + r] -= cu[r] * fixed.x + cv[r] * fixed.y;
-        }
+      c[j] = w * (q[(j + 2) % 3] - q[(j + 1) % 3]);
+      if (index[t[j]] < 0) fixed += c[j] * (t[j] == pin_a ? z_a : z_b);
+    }
+    for (int j = 0; j < 3; ++j) {
+      const int a = index[t[j]];
+      if (a < 0) continue;
+      rhs[a] -= std::conj(c[j]) * fixed;
+      for (int k = 0; k < 3; ++k) {
+        const int b = index[t[k]];
+        if (b >= 0 && b <= a) trip.emplace_back(a, b, std::conj(c[j]) * c[k]);
       }
     }
-    row += 2;
   }
-  if (row == 0) return false;
-  Eigen::SparseMatrix<double> A(row, 2 * nf);
-  A.setFromTriplets(trip.begin(), trip.end());
-  Eigen::SparseMatrix<double> AtA = A.transpose() * A;
-  const Eigen::VectorXd Atb = A.transpose() * rhs.head(row);
+  if (used == 0 || nf == 0) return false;
   // A vertex touched only by degenerate triangles has an empty row; a tiny
   // diagonal keeps the factorization defined without moving anything else.
   double trace = 0;
-  for (int k = 0; k < AtA.outerSize(); ++k) trace += AtA.coeff(k, k);
-  const double eps = 1e-14 * (trace > 0 ? trace / AtA.rows() : 1.0);
-  for (int k = 0; k < AtA.rows(); ++k) AtA.coeffRef(k, k) += eps;
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(AtA);
+  for (const auto& e : trip)
+    if (e.row() == e.col()) trace += e.value().real();
+  const double eps = 1e-14 * (trace > 0 ? trace / nf : 1.0);
+  for (int k = 0; k < nf; ++k) trip.emplace_back(k, k, eps);
+  Eigen::SparseMatrix<Complex> M(nf, nf);
+  M.setFromTriplets(trip.begin(), trip.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<Complex>, Eigen::Lower> solver(M);
   if (solver.info() != Eigen::Success) return false;
-  const Eigen::VectorXd x = solver.solve(Atb);
+  const Eigen::VectorXcd x = solver.solve(rhs);
   if (solver.info() != Eigen::Success || !x.allFinite()) return false;
 
   uv.assign(nv, Vec2{});
-  for (int v = 0; v < nv; ++v) {
-    if (index[v] >= 0) uv[v] = {x[2 * index[v]], x[2 * index[v] + 1]};
-  }
+  for (int v = 0; v < nv; ++v)
+    if (index[v] >= 0) uv[v] = {x[index[v]].real(), x[index[v]].imag()};
   uv[pin_a] = uv_a;
   uv[pin_b] = uv_b;
   return true;
