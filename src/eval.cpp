@@ -638,20 +638,26 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   const double floor_distance = prev.texel_world;  // |v| dt below one texel: no ratio
   auto bake_velocity = [&](const Vec3& v) { return norm(v) < s.bake_min_speed ? Vec3{} : v; };
 
-  // Flow agreement.
+  // Flow agreement: the texel's patch point on the previous frame, x_t, and
+  // the trapezoid velocity between the two frames (the bake integrates with
+  // both frames' fields; v_t alone would count one frame of acceleration,
+  // e.g. gravity's, as error).
   std::vector<float> ratio(count, NAN);
+  std::vector<uint8_t> matched(count, 0);
   parallel_for(count, [&](std::size_t b, std::size_t e) {
     Vec3 J[2];
     for (std::size_t i = b; i < e; ++i) {
       if (cur.patch[i] < 0) continue;
       const int64_t j = index.nearest(cur.patch[i], cur.pu[i], cur.pv[i]);
       if (j < 0) continue;
+      matched[i] = 1;
       Vec3 x_prev = prev.position[std::size_t(j)];
       if (patch_jacobian(prev, std::size_t(j), two_r, J)) {
         const double du = (cur.pu[i] - prev.pu[j]) * two_r, dv = (cur.pv[i] - prev.pv[j]) * two_r;
         x_prev += J[0] * du + J[1] * dv;
       }
-      const Vec3 v = bake_velocity(velocity_at(prev, std::size_t(j), x_prev));
+      const Vec3 v = (bake_velocity(velocity_at(prev, std::size_t(j), x_prev)) +
+                      bake_velocity(velocity_at(cur, i, cur.position[i]))) * 0.5;
       const double step = norm(v) * s.dt;
       if (!(step >= floor_distance)) continue;
       ratio[i] = float(norm(cur.position[i] - x_prev - v * s.dt) / step);
@@ -663,7 +669,10 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   m.flow_median = quantile(r, 0.5);
 
   // Popping and drift at rest: each covered texel goes back along its
-  // velocity to the previous frame's surface.
+  // velocity to the previous frame's surface. A texel whose patch point was
+  // visible on the previous frame (matched above) has not popped, whatever
+  // the back-advected point says: first-order back-advection misses by
+  // |a| dt^2 / 2 under acceleration, which would count patch borders as pops.
   struct Part {
     std::size_t compared = 0, rest = 0, drifted = 0;
     double w = 0, w_popped = 0;
@@ -680,13 +689,13 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
       const int32_t j = texel_under(prev, hit);
       if (j < 0 || prev.patch[j] < 0) continue;
       const double w = cur.area_per_texel[cur.texels.triangle[i]];
-      const bool popped = prev.patch[j] != cur.patch[i];
+      const bool other_patch = prev.patch[j] != cur.patch[i], popped = other_patch && !matched[i];
       ++p.compared;
       p.w += w;
       if (popped) p.w_popped += w;
       if (norm(v) <= s.rest_speed) {
         ++p.rest;
-        bool changed = popped;
+        bool changed = other_patch;
         if (!changed) {
           // The previous frame's (u,v) at the hit point: its texel's, moved
           // by the patch Jacobian to the exact point.

@@ -11,7 +11,6 @@
 
 #include "io_test_helpers.hpp"
 #include "lapflow/bake_manifest.hpp"
-#include "lapflow/demo_scene.hpp"
 #include "lapflow/errors.hpp"
 #include "lapflow/eval.hpp"
 #include "lapflow/image.hpp"
@@ -287,12 +286,10 @@ TEST(Eval, SameNumbersForOneAndTwoThreadsAndOwnExemplarIsClosest) {
 }
 
 TEST(Eval, BlendingLowersContrast) {
+  // Overlapping patches on a moving sphere: blended, their features average out.
   TempDir in("eval_blend_in"), erosion("eval_blend_erosion"), blend("eval_blend_blend");
-  DemoOptions demo;
-  demo.voxel_size = 1.0 / 40;
-  for (int f = 1; f <= 2; ++f) write_ply(fmt::format("{}/m.{:04d}.ply", in.str(), f), demo_frame(demo, f));
+  write_sphere_sequence(in.str(), 2, {0.6, 0, 0.2});
   BakeOptions o = small_bake(in.str(), erosion.str());
-  o.patch.radius = 0;  // automatic: many overlapping patches
   run_bake(o);
   o.out_dir = blend.str();
   o.raster.mode = RasterMode::Blend;

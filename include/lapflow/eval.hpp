@@ -50,11 +50,13 @@ struct FrameMetrics {
   double sliced_wasserstein = kNoValue;
   std::size_t surface_windows = 0;
   // Flow agreement: |d - v dt| / (|v| dt) over texels matched to the previous
-  // frame through (patch_id, u, v) where |v| dt >= one texel.
+  // frame through (patch_id, u, v) where |v| dt >= one texel; v is the mean
+  // of the input velocity at both ends of the displacement d.
   std::size_t flow_texels = 0;
   double flow_median = kNoValue, flow_p90 = kNoValue;
-  // Popping: area share of compared texels whose patch differs from the patch
-  // found at the back-advected point on the previous frame.
+  // Popping: area share of compared texels whose patch point was not visible
+  // on the previous frame and whose patch differs from the one found at the
+  // back-advected point there.
   std::size_t popping_texels = 0;
   double popping = kNoValue;
   std::optional<std::size_t> born, died;  ///< from NAME.stats.jsonl (died = retired + lost)
