@@ -11,6 +11,7 @@
 
 #include "lapflow/errors.hpp"
 #include "lapflow/mesh.hpp"
+#include "lapflow/parallel.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;
@@ -57,28 +58,50 @@ PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
   return make_preview_frame(std::move(mesh), c, h, bake.radius);
 }
 
-Box3 preview_bounds(const BakeManifest& bake, const std::vector<int>& frames) {
-  Box3 box;
-  for (int f : frames) {
-    const std::string obj = bake.frame_file("obj", f);
-    std::error_code ec;
-    if (!fs::exists(obj, ec)) throw InputError(obj, "missing: the bake has no mesh for this frame", f);
-    const Box3 b = bounding_box(read_uv_mesh(obj).mesh);
-    if (!b.empty()) {
-      box.extend(b.lo);
-      box.extend(b.hi);
+PreviewExtent preview_extent(const BakeManifest& bake, const std::vector<int>& frames, std::size_t max_points) {
+  // Each frame's OBJ on its own task; results by index, merged in order.
+  std::vector<Box3> boxes(frames.size());
+  std::vector<std::vector<Vec3>> points(frames.size());
+  std::vector<std::optional<InputError>> errors(frames.size());
+  const std::size_t per_frame = std::max<std::size_t>(1, max_points / std::max<std::size_t>(1, frames.size()));
+  parallel_for(frames.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const std::string obj = bake.frame_file("obj", frames[i]);
+      try {
+        std::error_code ec;
+        if (!fs::exists(obj, ec)) throw InputError(obj, "missing: the bake has no mesh for this frame", frames[i]);
+        const TriMesh m = read_uv_mesh(obj).mesh;
+        boxes[i] = bounding_box(m);
+        const std::size_t n = m.positions.size(), step = std::max<std::size_t>(1, (n + per_frame - 1) / per_frame);
+        for (std::size_t v = 0; v < n; v += step) points[i].push_back(m.positions[v]);
+      } catch (const InputError& err) {
+        errors[i] = err;
+      }
     }
+  }, 1);
+  PreviewExtent extent;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (errors[i]) throw *errors[i];
+    if (!boxes[i].empty()) {
+      extent.box.extend(boxes[i].lo);
+      extent.box.extend(boxes[i].hi);
+    }
+    extent.points.insert(extent.points.end(), points[i].begin(), points[i].end());
   }
-  return box;
+  return extent;
 }
 
-PreviewCamera frame_camera(const Box3& box_in, const Vec3& up_in, double aspect, double azimuth, double elevation,
-                           double fov) {
-  Box3 box = box_in;
-  if (box.empty()) {
-    box.extend({-0.5, -0.5, -0.5});
-    box.extend({0.5, 0.5, 0.5});
+PreviewCamera frame_camera(const std::vector<Vec3>& points_in, const Vec3& up_in, double aspect, double azimuth,
+                           double elevation, double fov, double min_distance) {
+  std::vector<Vec3> fallback;
+  const std::vector<Vec3>* points = &points_in;
+  if (points_in.empty()) {
+    for (int k = 0; k < 8; ++k) fallback.push_back({(k & 1) ? 0.5 : -0.5, (k & 2) ? 0.5 : -0.5, (k & 4) ? 0.5 : -0.5});
+    points = &fallback;
   }
+  Box3 box;
+  for (const Vec3& p : *points) box.extend(p);
+  const Vec3 c = box.center();
   const Vec3 up = norm(up_in) > 0 ? normalized(up_in) : Vec3{0, 0, 1};
   // The "front" of the scene: -Y for a Z-up world (Blender), +Z for a Y-up one (Houdini, Maya).
   Vec3 front = std::abs(up.z) > 0.5 ? Vec3{0, -1, 0} : Vec3{0, 0, 1};
@@ -86,11 +109,6 @@ PreviewCamera frame_camera(const Box3& box_in, const Vec3& up_in, double aspect,
   const Vec3 side = cross(up, front);
   const double az = azimuth * std::numbers::pi / 180, el = elevation * std::numbers::pi / 180;
   const Vec3 to_eye = normalized((front * std::cos(az) + side * std::sin(az)) * std::cos(el) + up * std::sin(el));
-
-  PreviewCamera cam;
-  cam.up = up;
-  cam.fov = fov;
-  cam.target = box.center();
   const Vec3 forward = -to_eye;
   Vec3 right = cross(forward, up);
   if (norm(right) < 1e-9) right = std::abs(up.x) < 0.9 ? cross(forward, Vec3{1, 0, 0}) : cross(forward, Vec3{0, 1, 0});
@@ -98,18 +116,39 @@ PreviewCamera frame_camera(const Box3& box_in, const Vec3& up_in, double aspect,
   const Vec3 cam_up = cross(right, forward);
   const double tan_v = std::tan(0.5 * fov * std::numbers::pi / 180) * 0.9;  // 10% margin
   const double tan_h = tan_v * aspect;
-  // Smallest distance d at which every corner projects inside the margin:
-  // a corner at offset (x, y, z) in the camera frame is at depth d + z.
-  double d = 0;
-  for (int k = 0; k < 8; ++k) {
-    const Vec3 corner{(k & 1) ? box.hi.x : box.lo.x, (k & 2) ? box.hi.y : box.lo.y, (k & 4) ? box.hi.z : box.lo.z};
-    const Vec3 q = corner - cam.target;
+
+  // The eye at c + right a + cam_up b - forward d sees point (x, y, z) (camera
+  // frame about c) at depth z + d; it is inside when |x - a| <= tan_h (z + d).
+  // Some a fits every point iff max(x - tan_h z) - min(x + tan_h z) <= 2 tan_h d:
+  // that gives the smallest d, and a is the middle of the feasible interval.
+  double hx = -INFINITY, lx = INFINITY, hy = -INFINITY, ly = INFINITY;
+  for (const Vec3& p : *points) {
+    const Vec3 q = p - c;
     const double x = dot(q, right), y = dot(q, cam_up), z = dot(q, forward);
-    d = std::max({d, std::abs(x) / tan_h - z, std::abs(y) / tan_v - z});
+    hx = std::max(hx, x - tan_h * z);
+    lx = std::min(lx, x + tan_h * z);
+    hy = std::max(hy, y - tan_v * z);
+    ly = std::min(ly, y + tan_v * z);
   }
-  d = std::max(d, 1e-3 + 0.5 * norm(box.size()));
-  cam.eye = cam.target + to_eye * d;
+  double d = std::max((hx - lx) / (2 * tan_h), (hy - ly) / (2 * tan_v));
+  d = std::max({d, min_distance, 1e-3 + 0.05 * norm(box.size())});
+  const double a = 0.5 * (hx + lx), b = 0.5 * (hy + ly);  // midpoints: (hx - tan_h d + lx + tan_h d) / 2
+
+  PreviewCamera cam;
+  cam.up = up;
+  cam.fov = fov;
+  cam.target = c + right * a + cam_up * b;
+  cam.eye = cam.target - forward * d;
   return cam;
+}
+
+PreviewCamera frame_camera(const Box3& box, const Vec3& up, double aspect, double azimuth, double elevation,
+                           double fov) {
+  std::vector<Vec3> corners;
+  if (!box.empty())
+    for (int k = 0; k < 8; ++k)
+      corners.push_back({(k & 1) ? box.hi.x : box.lo.x, (k & 2) ? box.hi.y : box.lo.y, (k & 4) ? box.hi.z : box.lo.z});
+  return frame_camera(corners, up, aspect, azimuth, elevation, fov);
 }
 
 Image side_by_side(const std::vector<Image>& panels, int gap, const Vec3& gap_color) {

@@ -106,14 +106,16 @@ void run_preview(PreviewCli& c) {
   // One camera for the whole sequence: the bounding box of every frame of every bake.
   info("lapflow preview: {} frame{} of {} ({}){}", frames.size(), frames.size() == 1 ? "" : "s", main.name,
        main.dir, comparing ? fmt::format(", {} bakes side by side", bakes.size()) : "");
-  Box3 bounds;
+  PreviewExtent extent;
   for (const BakeManifest& b : bakes) {
-    const Box3 bb = preview_bounds(b, frames);
-    if (!bb.empty()) {
-      bounds.extend(bb.lo);
-      bounds.extend(bb.hi);
+    const PreviewExtent e = preview_extent(b, frames, 200000 / bakes.size());
+    if (!e.box.empty()) {
+      extent.box.extend(e.box.lo);
+      extent.box.extend(e.box.hi);
     }
+    extent.points.insert(extent.points.end(), e.points.begin(), e.points.end());
   }
+  const Box3& bounds = extent.box;
   const double aspect = double(o.width) / o.height;
   std::optional<PreviewCamera> fixed;
   if (!c.camera.empty()) {
@@ -133,6 +135,28 @@ void run_preview(PreviewCli& c) {
   const bool spin_one = c.turntable && frames.size() == 1;
   const int pictures = spin_one ? c.views : int(frames.size());
   const std::string kind = spin_one ? "turntable" : (comparing ? "compare" : "preview");
+
+  // The cameras: framed from every vertex of the sequence; a turntable keeps
+  // the largest distance of its views so the liquid does not breathe.
+  std::vector<PreviewCamera> cameras(static_cast<std::size_t>(pictures));
+  double distance = 0;
+  for (int pass = 0; pass < (c.turntable && !fixed ? 2 : 1); ++pass)
+    for (int i = 0; i < pictures; ++i) {
+      PreviewCamera& cam = cameras[std::size_t(i)];
+      if (fixed) {
+        cam = *fixed;
+        if (c.turntable) {  // orbit the given eye about the target
+          const double a = 2 * std::numbers::pi * i / pictures;
+          const Vec3 q = cam.eye - cam.target, up = normalized(cam.up);
+          const Vec3 along = up * dot(q, up), flat = q - along, side = cross(up, flat);
+          cam.eye = cam.target + along + flat * std::cos(a) + side * std::sin(a);
+        }
+        continue;
+      }
+      const double az = c.turntable ? c.azimuth + 360.0 * i / pictures : c.azimuth;
+      cam = frame_camera(extent.points, o.look.up, aspect, az, c.elevation, c.fov, distance);
+      if (pass == 0) distance = std::max(distance, norm(cam.eye - cam.target));
+    }
   const std::string out_dir = c.out.empty() ? (fs::path(main.dir) / "preview").string() : c.out;
   std::error_code ec;
   fs::create_directories(out_dir, ec);
@@ -161,28 +185,18 @@ void run_preview(PreviewCli& c) {
   for (int i = 0; i < pictures; ++i) {
     const auto start = std::chrono::steady_clock::now();
     const int frame = spin_one ? frames.front() : frames[std::size_t(i)];
-    PreviewCamera cam;
-    if (fixed) {
-      cam = *fixed;
-      if (c.turntable) {  // orbit the given eye about the target
-        const double a = 2 * std::numbers::pi * i / pictures;
-        const Vec3 q = cam.eye - cam.target, up = normalized(cam.up);
-        const Vec3 along = up * dot(q, up), flat = q - along, side = cross(up, flat);
-        cam.eye = cam.target + along + flat * std::cos(a) + side * std::sin(a);
-      }
-    } else {
-      const double az = c.turntable ? c.azimuth + 360.0 * i / pictures : c.azimuth;
-      cam = frame_camera(bounds, o.look.up, aspect, az, c.elevation, c.fov);
-    }
+    const PreviewCamera& cam = cameras[std::size_t(i)];
     if (loaded.empty() || !spin_one) {
       loaded.clear();
       for (const BakeManifest& b : bakes) loaded.push_back(load_preview_frame(b, frame));
     }
+    const auto loaded_at = std::chrono::steady_clock::now();
     std::vector<Image> panels;
     for (std::size_t b = 0; b < bakes.size(); ++b) {
       panels.push_back(render_preview(loaded[b], cam, bounds, o));
       if (comparing) label(panels.back(), label_size / 2, label_size / 2, labels[b], false);
     }
+    const auto rendered_at = std::chrono::steady_clock::now();
     Image picture = comparing ? side_by_side(panels, 2) : std::move(panels.front());
     label(picture, picture.width - label_size / 2, label_size / 2,
           spin_one ? fmt::format("frame {}  view {}/{}", frame, i + 1, pictures) : fmt::format("frame {}", frame),
@@ -193,7 +207,12 @@ void run_preview(PreviewCli& c) {
     written.push_back(path);
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     seconds += s;
-    progress.step(fmt::format("{} ({:.2f} s)", fs::path(path).filename().string(), s));
+    std::size_t triangles = 0;
+    for (const PreviewFrame& p : loaded) triangles += p.mesh.mesh.triangle_count();
+    progress.step(fmt::format("{}: {} triangles, read {:.2f} s, render {:.2f} s, total {:.2f} s",
+                              fs::path(path).filename().string(), triangles,
+                              std::chrono::duration<double>(loaded_at - start).count(),
+                              std::chrono::duration<double>(rendered_at - loaded_at).count(), s));
   }
   progress.finish();
   info("done: {} picture{} in {:.1f} s ({:.2f} s each) in {}", pictures, pictures == 1 ? "" : "s", seconds,

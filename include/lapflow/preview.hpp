@@ -80,14 +80,27 @@ PreviewFrame make_preview_frame(UvMesh mesh, const Image& color, const Image& di
 /// InputError naming the missing or malformed file.
 PreviewFrame load_preview_frame(const BakeManifest& bake, int frame);
 
-/// Bounding box of the frames' meshes (reads the OBJ vertices only). Throws
-/// InputError naming a missing or malformed file.
-Box3 preview_bounds(const BakeManifest& bake, const std::vector<int>& frames);
+/// Where a sequence's liquid goes: the bounding box of every frame and up to
+/// `max_points` of its vertices (evenly strided per frame) for framing.
+struct PreviewExtent {
+  Box3 box;
+  std::vector<Vec3> points;
+};
 
-/// A 3/4 elevated view of `box`: looking at its centre from `azimuth` degrees
-/// about `up` (0 = from the -Y side for a Z-up world, from +Z for Y-up) and
-/// `elevation` degrees above the horizon, at the distance where the whole box
-/// fits the picture (aspect = width / height) with a small margin.
+/// The extent of the frames' meshes (reads the OBJs, in parallel). Throws
+/// InputError naming a missing or malformed file.
+PreviewExtent preview_extent(const BakeManifest& bake, const std::vector<int>& frames,
+                             std::size_t max_points = 200000);
+
+/// A 3/4 elevated view of `points`: looking from `azimuth` degrees about `up`
+/// (0 = from the -Y side for a Z-up world, from +Z for Y-up) and `elevation`
+/// degrees above the horizon, at the distance and centre where every point
+/// fits the picture (aspect = width / height) with a 10% margin, the tightest
+/// side touching it. `min_distance` forces the camera at least that far (a
+/// turntable keeps one distance for every view).
+PreviewCamera frame_camera(const std::vector<Vec3>& points, const Vec3& up, double aspect, double azimuth = -35,
+                           double elevation = 28, double fov = 30, double min_distance = 0);
+/// The same for the 8 corners of a box.
 PreviewCamera frame_camera(const Box3& box, const Vec3& up, double aspect, double azimuth = -35,
                            double elevation = 28, double fov = 30);
 
