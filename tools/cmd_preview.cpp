@@ -1,5 +1,6 @@
 // `lapflow preview`: ray-traced pictures (and an MP4) of baked frames, one
 // bake or several side by side.
+#include <ctime>
 #include <filesystem>
 #include <numbers>
 #include <set>
@@ -191,12 +192,14 @@ void run_preview(PreviewCli& c) {
       for (const BakeManifest& b : bakes) loaded.push_back(load_preview_frame(b, frame));
     }
     const auto loaded_at = std::chrono::steady_clock::now();
+    const std::clock_t cpu_start = std::clock();  // process CPU time, all threads
     std::vector<Image> panels;
     for (std::size_t b = 0; b < bakes.size(); ++b) {
       panels.push_back(render_preview(loaded[b], cam, bounds, o));
       if (comparing) label(panels.back(), label_size / 2, label_size / 2, labels[b], false);
     }
     const auto rendered_at = std::chrono::steady_clock::now();
+    const double render_cpu = double(std::clock() - cpu_start) / CLOCKS_PER_SEC;
     Image picture = comparing ? side_by_side(panels, 2) : std::move(panels.front());
     label(picture, picture.width - label_size / 2, label_size / 2,
           spin_one ? fmt::format("frame {}  view {}/{}", frame, i + 1, pictures) : fmt::format("frame {}", frame),
@@ -209,10 +212,10 @@ void run_preview(PreviewCli& c) {
     seconds += s;
     std::size_t triangles = 0;
     for (const PreviewFrame& p : loaded) triangles += p.mesh.mesh.triangle_count();
-    progress.step(fmt::format("{}: {} triangles, read {:.2f} s, render {:.2f} s, total {:.2f} s",
+    progress.step(fmt::format("{}: {} triangles, read {:.2f} s, render {:.2f} s ({:.2f} cpu-s), total {:.2f} s",
                               fs::path(path).filename().string(), triangles,
                               std::chrono::duration<double>(loaded_at - start).count(),
-                              std::chrono::duration<double>(rendered_at - loaded_at).count(), s));
+                              std::chrono::duration<double>(rendered_at - loaded_at).count(), render_cpu, s));
   }
   progress.finish();
   info("done: {} picture{} in {:.1f} s ({:.2f} s each) in {}", pictures, pictures == 1 ? "" : "s", seconds,
