@@ -149,6 +149,8 @@ void trim_to_ball(PatchMesh& m, const Vec3& p, double r) {
     if (nearest < 0 || dist[t] < dist[nearest]) nearest = int(t);
   }
   if (nearest < 0) return;
+  // Edge-connected pieces of the triangles within r: union-find over the
+  // triangles, joined through shared edges (sorted edge keys).
   std::vector<std::pair<uint64_t, int>> edges;
   edges.reserve(3 * nt);
   for (std::size_t t = 0; t < nt; ++t)
@@ -158,21 +160,17 @@ void trim_to_ball(PatchMesh& m, const Vec3& p, double r) {
         edges.push_back({(uint64_t(std::min(a, b)) << 32) | std::max(a, b), int(t)});
       }
   std::sort(edges.begin(), edges.end());
-  std::vector<std::vector<int>> next(nt);
+  std::vector<int> parent(nt);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
   for (std::size_t i = 1; i < edges.size(); ++i)
-    if (edges[i].first == edges[i - 1].first) {
-      next[edges[i].second].push_back(edges[i - 1].second);
-      next[edges[i - 1].second].push_back(edges[i].second);
-    }
+    if (edges[i].first == edges[i - 1].first) parent[find(edges[i].second)] = find(edges[i - 1].second);
   std::vector<uint8_t> keep(nt, 0);
-  std::vector<int> stack{nearest};
-  keep[nearest] = 1;
-  while (!stack.empty()) {
-    const int t = stack.back();
-    stack.pop_back();
-    for (int u : next[t])
-      if (!keep[u]) keep[u] = 1, stack.push_back(u);
-  }
+  const int root = find(nearest);
+  for (std::size_t t = 0; t < nt; ++t) keep[t] = (dist[t] <= r || int(t) == nearest) && find(int(t)) == root;
   PatchMesh out;
   std::vector<int32_t> remap(m.positions.size(), -1);
   for (std::size_t t = 0; t < nt; ++t) {
@@ -233,7 +231,9 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
       // Project once more from the snapped point: that is what advection does
       // next frame, and on a shared edge it may pick the other triangle; doing
       // it now makes a still scene bake identical atlases from frame 1 on.
-      const ClosestHit again = surface.closest(hit.point, 0.25 * r);
+      // The snapped point is on the surface up to rounding, so a tiny radius
+      // finds the same answer as r/4 with a cheaper search.
+      const ClosestHit again = surface.closest(hit.point, 1e-6 * r);
       if (again.found) hit = again;
       under[v] = hit.triangle;
       m.positions[v] = hit.point;
