@@ -2,6 +2,7 @@
 // must show the atlas's colours. Skipped when `blender` is not on PATH (CI).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -118,6 +119,58 @@ TEST(BlenderLookdev, RendersTheAtlasColoursOfABake) {
   // The texture shows as variation (lava: dark plates, bright cracks), far
   // above the render noise of the ratio.
   EXPECT_GT(variation, 0.2);
+}
+
+TEST(BlenderPatches, ColoursEachPatchCoreByItsId) {
+  TempDir dir("blender_patches");
+  if (!have_blender(dir)) GTEST_SKIP() << "blender is not on PATH: the Blender patch script is not tested here";
+  const std::string lapflow = LAPFLOW_BINARY;
+  std::string err;
+  ASSERT_EQ(test::run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames 2 --triangles 3000 --no-bake -q",
+                              nullptr, &err, dir),
+            0)
+      << err;
+  ASSERT_EQ(test::run_command(lapflow + " patches --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --radius 0.06 -q --out '" +
+                                  (dir / "p") + "'",
+                              nullptr, &err, dir),
+            0)
+      << err;
+  ASSERT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_patches.py' -- "
+                              "--patches '" + (dir / "p") + "/demo.patches.%04d.ply' --frames 2 --samples 4 "
+                              "--resolution 160x120 --no-ground --out '" + (dir / "r") + "'",
+                              nullptr, &err, dir),
+            0)
+      << err;
+  const Image img = read_image(dir / "r/demo.patches.0002.png");
+  ASSERT_EQ(img.width, 160);
+  ASSERT_EQ(img.height, 120);
+  // The cores are coloured by a hash of patch_id: saturated pixels of many
+  // different hues (the sky and the fluid-free background are not saturated).
+  std::array<int, 12> hue_bins{};
+  int saturated = 0;
+  for (std::size_t p = 0; p < std::size_t(img.width) * img.height; ++p) {
+    const float* c = &img.pixels[p * std::size_t(img.channels)];
+    const float hi = std::max({c[0], c[1], c[2]}), lo = std::min({c[0], c[1], c[2]});
+    if (hi < 0.02f || (hi - lo) / hi < 0.5f) continue;
+    ++saturated;
+    double h;  // hue in [0, 6)
+    if (hi == c[0]) h = std::fmod((c[1] - c[2]) / (hi - lo) + 6.0, 6.0);
+    else if (hi == c[1]) h = (c[2] - c[0]) / (hi - lo) + 2.0;
+    else h = (c[0] - c[1]) / (hi - lo) + 4.0;
+    ++hue_bins[std::min<std::size_t>(11, std::size_t(h * 2))];
+  }
+  int hues = 0;
+  for (int n : hue_bins) hues += n >= 10;
+  std::printf("saturated pixels %d of %d, hue bins used %d of 12\n", saturated, img.width * img.height, hues);
+  EXPECT_GT(saturated, img.width * img.height / 50);
+  EXPECT_GE(hues, 5);
+
+  // A missing dump is a clear error.
+  EXPECT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_patches.py' -- "
+                              "--patches '" + (dir / "p") + "/demo.patches.%04d.ply' --frames 7",
+                              nullptr, &err, dir),
+            2);
+  EXPECT_NE(err.find("demo.patches.0007.ply"), std::string::npos) << err;
 }
 
 TEST(BlenderLookdev, MissingBakeFailsWithAClearMessage) {
