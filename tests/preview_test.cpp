@@ -297,6 +297,25 @@ TEST(PreviewCommand, CompareWritesOnePanelPerBakeSideBySide) {
   }
 }
 
+TEST(PreviewCommand, VideoWithFfmpegAndOneWarningWithout) {
+  test::TempDir dir("preview_video");
+  write_fake_bake(dir / "a", "erosion", kRed);
+  std::string out, err;
+  const std::string args = " preview " + (dir / "a") + " --width 48 --height 32 --samples 1 --out " + (dir / "out");
+  // No ffmpeg on PATH: the pictures, no MP4, and a warning that says why.
+  ASSERT_EQ(test::run_command("PATH=/nonexistent " + std::string(LAPFLOW_BINARY) + args, &out, &err, dir), 0) << err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "out/shot.preview.0002.png"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "out/shot.preview.mp4"));
+  EXPECT_NE(err.find("no ffmpeg"), std::string::npos) << err;
+  if (!ffmpeg_available()) GTEST_SKIP() << "no ffmpeg here";
+  ASSERT_EQ(test::run_command(std::string(LAPFLOW_BINARY) + args, &out, &err, dir), 0) << err;
+  const std::string mp4 = test::read_bytes(dir / "out/shot.preview.mp4");
+  ASSERT_GT(mp4.size(), 100u);
+  EXPECT_EQ(mp4.substr(4, 4), "ftyp");  // an ISO media file
+  for (const auto& e : std::filesystem::directory_iterator(dir / "out"))  // no scratch or temporary files left
+    EXPECT_TRUE(e.path().extension() == ".png" || e.path().extension() == ".mp4") << e.path();
+}
+
 TEST(PreviewCommand, MissingFilesAreErrorsNamingThem) {
   test::TempDir dir("preview_bad");
   write_fake_bake(dir / "a", "erosion", kRed);
