@@ -16,20 +16,20 @@
 namespace lapflow {
 namespace fs = std::filesystem;
 
-PreviewFrame make_preview_frame(UvMesh mesh, const Image& color, const Image& displacement, double radius) {
+PreviewFrame make_preview_frame(UvMesh mesh, Image color, Image displacement, double radius) {
   PreviewFrame f;
   f.mesh = std::move(mesh);
   f.normals = vertex_normals(f.mesh.mesh);
   f.radius = radius;
   if (!color.empty()) {
     Exemplar ex;
-    ex.color = color;
     if (!displacement.empty()) {
       ex.displacement = displacement.width == color.width && displacement.height == color.height
-                            ? displacement
+                            ? std::move(displacement)
                             : resize_image(displacement, color.width, color.height);
       f.bump = true;
     }
+    ex.color = std::move(color);
     f.texture = build_exemplar_mips(ex);
   }
   return f;
@@ -44,7 +44,7 @@ PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
   UvMesh mesh = read_uv_mesh(obj);
   if (mesh.corner_uv.empty() && !mesh.mesh.empty())
     throw InputError(obj, "no texture coordinates (vt): not a lapflow bake frame", frame);
-  const Image c = read_image(color, ColorSpace::Linear);
+  Image c = read_image(color, ColorSpace::Linear);
   if (c.channels < 3) throw InputError(color, "the colour atlas needs R, G, B channels", frame);
   Image h;
   if (fs::exists(disp, ec)) {
@@ -55,7 +55,7 @@ PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
       h = std::move(one);
     }
   }
-  return make_preview_frame(std::move(mesh), c, h, bake.radius);
+  return make_preview_frame(std::move(mesh), std::move(c), std::move(h), bake.radius);
 }
 
 PreviewExtent preview_extent(const BakeManifest& bake, const std::vector<int>& frames, std::size_t max_points) {

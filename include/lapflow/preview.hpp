@@ -73,7 +73,7 @@ struct PreviewFrame {
 /// A frame from its parts: `color` is the RGB(A) linear atlas, `displacement`
 /// one channel in exemplar units (empty: no bump; resampled to the colour
 /// atlas' size when it differs).
-PreviewFrame make_preview_frame(UvMesh mesh, const Image& color, const Image& displacement, double radius);
+PreviewFrame make_preview_frame(UvMesh mesh, Image color, Image displacement, double radius);
 
 /// Reads frame `frame` of a bake: NAME.N.obj, NAME.color.N.exr and
 /// NAME.disp.N.exr (the latter optional: no bump when it is missing). Throws
