@@ -25,6 +25,7 @@ namespace lapflow {
 namespace {
 
 constexpr int kMaxSubsteps = 64;
+constexpr double kNearFraction = 1.0 / 16;  // first projection radius, as a fraction of max_projection * r
 
 struct Moved {
   Vec3 position;
@@ -85,7 +86,12 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       Moved& m = moved[i];
       m.position = x;
       if (!is_finite(x)) continue;
-      const ClosestHit hit = next.closest(x, max_proj);
+      // Most advected points are within a small fraction of r of the new
+      // surface: a small query radius lets Embree prune far more of its tree.
+      // The closest point within the small radius, when there is one, is the
+      // closest point within max_proj too, so the answer is the same.
+      ClosestHit hit = next.closest(x, kNearFraction * max_proj);
+      if (!hit.found) hit = next.closest(x, max_proj);
       if (hit.found && hit.distance <= max_proj) {
         // A point already on the surface stays bit for bit (stillness: zero
         // velocity on an unchanged mesh must not let rounding creep).
@@ -112,38 +118,54 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       const Moved& c = moved[nverts + i];
       if (is_finite(c.position)) patch.center = c.position;
 
-      std::vector<Tri> tris;
-      tris.reserve(patch.triangles.size());
+      auto residual = [&](std::size_t v) {
+        const Tri& f = mesh.triangles[mv[v].triangle];
+        const Vec3& a = mesh.positions[f[0]];
+        return norm(closest_point_on_triangle(mv[v].position, a, mesh.positions[f[1]], mesh.positions[f[2]]).point -
+                    mv[v].position);
+      };
       std::vector<uint8_t> used(n, 0);
+      std::size_t kept_triangles = 0;
       for (const Tri& f : patch.triangles)
         if (mv[f[0]].kept && mv[f[1]].kept && mv[f[2]].kept) {
-          tris.push_back(f);
+          ++kept_triangles;
           used[f[0]] = used[f[1]] = used[f[2]] = 1;
         }
-      per_patch[i].removed_t = patch.triangles.size() - tris.size();
-      std::vector<int32_t> remap(n, -1);
-      std::vector<Vec3> pos;
-      std::vector<Vec2> uv;
-      std::vector<int32_t> st;
-      pos.reserve(n), uv.reserve(n), st.reserve(n);
-      for (std::size_t v = 0; v < n; ++v) {
-        if (!used[v]) continue;
-        remap[v] = int32_t(pos.size());
-        pos.push_back(mv[v].position);
-        uv.push_back(patch.rest_uv[v]);
-        st.push_back(mv[v].triangle);
-        const Tri& f = mesh.triangles[mv[v].triangle];
-        const Vec3 q =
-            closest_point_on_triangle(mv[v].position, mesh.positions[f[0]], mesh.positions[f[1]], mesh.positions[f[2]]).point;
-        per_patch[i].residual = std::max(per_patch[i].residual, norm(q - mv[v].position));
+      per_patch[i].removed_t = patch.triangles.size() - kept_triangles;
+      if (kept_triangles == patch.triangles.size() && std::find(used.begin(), used.end(), 0) == used.end()) {
+        // Nothing removed (the common case): move the vertices in place.
+        patch.surface_triangle.resize(n);
+        for (std::size_t v = 0; v < n; ++v) {
+          patch.positions[v] = mv[v].position;
+          patch.surface_triangle[v] = mv[v].triangle;
+          per_patch[i].residual = std::max(per_patch[i].residual, residual(v));
+        }
+      } else {
+        std::vector<Tri> tris;
+        tris.reserve(kept_triangles);
+        for (const Tri& f : patch.triangles)
+          if (mv[f[0]].kept && mv[f[1]].kept && mv[f[2]].kept) tris.push_back(f);
+        std::vector<int32_t> remap(n, -1);
+        std::vector<Vec3> pos;
+        std::vector<Vec2> uv;
+        std::vector<int32_t> st;
+        pos.reserve(n), uv.reserve(n), st.reserve(n);
+        for (std::size_t v = 0; v < n; ++v) {
+          if (!used[v]) continue;
+          remap[v] = int32_t(pos.size());
+          pos.push_back(mv[v].position);
+          uv.push_back(patch.rest_uv[v]);
+          st.push_back(mv[v].triangle);
+          per_patch[i].residual = std::max(per_patch[i].residual, residual(v));
+        }
+        per_patch[i].removed_v = n - pos.size();
+        for (Tri& f : tris)
+          for (int k = 0; k < 3; ++k) f[k] = remap[f[k]];
+        patch.positions = std::move(pos);
+        patch.rest_uv = std::move(uv);
+        patch.surface_triangle = std::move(st);
+        patch.triangles = std::move(tris);
       }
-      per_patch[i].removed_v = n - pos.size();
-      for (Tri& f : tris)
-        for (int k = 0; k < 3; ++k) f[k] = remap[f[k]];
-      patch.positions = std::move(pos);
-      patch.rest_uv = std::move(uv);
-      patch.surface_triangle = std::move(st);
-      patch.triangles = std::move(tris);
       if (patch.alive()) patch_weights(mesh, r, weights, patch);
     }
   }, 8);
