@@ -43,10 +43,16 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
   patch.triangle_quality.assign(nt, 0.f);
   const double scale = 2 * radius;
   const double denom = options.delta_max - 1;
-  auto fluid_normal = [&](int32_t t) {
-    if (t < 0 || std::size_t(t) >= surface.triangles.size()) return Vec3{};
-    return normalized(triangle_normal_area2(surface, t));
-  };
+  // Unit normal of the fluid triangle under each vertex, once per vertex
+  // (each vertex is shared by about six patch triangles).
+  std::vector<Vec3> fluid_normal;
+  if (!patch.surface_triangle.empty()) {
+    fluid_normal.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) {
+      const int32_t t = patch.surface_triangle[v];
+      if (t >= 0 && std::size_t(t) < surface.triangles.size()) fluid_normal[v] = normalized(triangle_normal_area2(surface, t));
+    }
+  }
   for (std::size_t t = 0; t < nt; ++t) {
     const Tri& f = patch.triangles[t];
     double delta = detail::triangle_distortion(patch.rest_uv[f[0]], patch.rest_uv[f[1]], patch.rest_uv[f[2]],
@@ -55,7 +61,7 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
     // Folded: the patch triangle faces against the fluid it lies on.
     if (!patch.surface_triangle.empty()) {
       Vec3 under;
-      for (int k = 0; k < 3; ++k) under += fluid_normal(patch.surface_triangle[f[k]]);
+      for (int k = 0; k < 3; ++k) under += fluid_normal[f[k]];
       const Vec3 n = cross(patch.positions[f[1]] - patch.positions[f[0]], patch.positions[f[2]] - patch.positions[f[0]]);
       if (norm2(under) > 0 && dot(n, under) <= 0) delta = std::numeric_limits<double>::infinity();
     }
