@@ -306,8 +306,8 @@ Image render_preview(const PreviewFrame& frame, const PreviewCamera& camera, con
     // From the camera's upper left and a little behind it.
     Vec3 back = -cam.forward;
     back = normalized(back - look.up * dot(back, look.up));
-    const Vec3 side = normalized(cross(look.up, back));  // the camera's left on the ground
-    light = normalized(look.up * 1.25 + side * -0.75 + back * 0.55);
+    const Vec3 right = normalized(cross(look.up, back));  // the camera's right, level with the ground
+    light = normalized(look.up * 1.25 - right * 0.75 + back * 0.55);
     if (norm(light) == 0) light = look.up;
   }
   const Vec3 lu = perpendicular(light), lv = cross(light, lu);
