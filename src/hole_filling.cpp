@@ -15,6 +15,7 @@
 #include <unordered_set>
 
 #include "lapflow/parallel.hpp"
+#include "lapflow/surface_query.hpp"
 #include "raster_internal.hpp"
 
 namespace lapflow::detail {
@@ -208,6 +209,60 @@ std::size_t propagate_keys(RasterContext& ctx) {
     if (changed == 0) break;  // charts no patch reaches at all
     open.swap(still);
   }
+  return filled;
+}
+
+std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches) {
+  const TexelMap& tm = ctx.atlas.texels;
+  std::vector<uint32_t> open;
+  for (std::size_t i = 0; i < tm.size(); ++i)
+    if (ctx.keys[i] == kNoKey) open.push_back(uint32_t(i));
+  if (open.empty() || patches.patches.empty()) return 0;
+  // Bounding boxes of the patches: most are skipped on one box distance.
+  const std::size_t np = patches.patches.size();
+  std::vector<Vec3> lo(np, Vec3{INFINITY, INFINITY, INFINITY}), hi(np, Vec3{-INFINITY, -INFINITY, -INFINITY});
+  parallel_for(np, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p)
+      for (const Vec3& q : patches.patches[p].positions) {
+        lo[p] = {std::min(lo[p].x, q.x), std::min(lo[p].y, q.y), std::min(lo[p].z, q.z)};
+        hi[p] = {std::max(hi[p].x, q.x), std::max(hi[p].y, q.y), std::max(hi[p].z, q.z)};
+      }
+  }, 64);
+  std::vector<uint64_t> found(open.size(), kNoKey);
+  parallel_for(open.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t j = b; j < e; ++j) {
+      const uint32_t i = open[j];
+      const Vec3 x = texel_surface_point(ctx, i).position;
+      const int F = tm.triangle[i];
+      double best = INFINITY;
+      uint64_t best_key = kNoKey;
+      for (std::size_t p = 0; p < np; ++p) {
+        const Vec3 d{std::max({lo[p].x - x.x, 0.0, x.x - hi[p].x}), std::max({lo[p].y - x.y, 0.0, x.y - hi[p].y}),
+                     std::max({lo[p].z - x.z, 0.0, x.z - hi[p].z})};
+        if (norm2(d) > best) continue;
+        const Patch& patch = patches.patches[p];
+        if (patch.rest_uv.size() != patch.positions.size()) continue;
+        for (std::size_t t = 0; t < patch.triangles.size(); ++t) {
+          const Tri& T = patch.triangles[t];
+          const double d2 =
+              norm2(closest_point_on_triangle(x, patch.positions[T[0]], patch.positions[T[1]], patch.positions[T[2]])
+                        .point - x);
+          const uint64_t key = make_key(p, t);
+          if (d2 > best || (d2 == best && key >= best_key)) continue;
+          // Only a triangle whose map extends to this texel (non-degenerate
+          // through its fluid triangle), so the resolve gives it (u, v).
+          Vec2 P[3];
+          if (!winner_pixels(ctx, patch, int(t), F, P)) continue;
+          if (!(std::abs(cross(P[1] - P[0], P[2] - P[0])) > 1e-12)) continue;
+          best = d2, best_key = key;
+        }
+      }
+      found[j] = best_key;
+    }
+  }, 1);
+  std::size_t filled = 0;
+  for (std::size_t j = 0; j < open.size(); ++j)
+    if (found[j] != kNoKey) ctx.keys[open[j]] = found[j], ++filled;
   return filled;
 }
 

@@ -117,6 +117,13 @@ std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const P
 /// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
 std::size_t propagate_keys(RasterContext& ctx);
 
+/// Last resort after propagate_keys, for chart texels with no covered texel
+/// in their chart (a tiny chart whose newborn failed): each takes the key of
+/// the patch triangle nearest to its surface point in 3D (ties: lowest key)
+/// among those whose map extends to it; the resolve extrapolates that map.
+/// Returns texels so filled.
+std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches);
+
 /// Fills texels outside charts from the nearest chart texel: `gutter`
 /// 8-neighbour dilation passes, then a row-nearest and a row-copy fill.
 /// `source` holds, per pixel, its own index on chart texels and -1 elsewhere;

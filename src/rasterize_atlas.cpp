@@ -626,11 +626,16 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     }, 1);
     st.seconds_raster += seconds_since(t0);
   }
-  // Texels hole filling could not reach (create_patch failed there) still
-  // need a colour: they take a covered neighbour's winner within their chart.
-  // Without hole filling the holes are left visible (alpha 0).
+  // Texels hole filling could not reach (create_patch failed there, or the
+  // newborn does not keep its own centre) still need a patch: they take a
+  // covered neighbour's winner within their chart, and in charts with none,
+  // the nearest patch triangle in 3D. Counted in forced_texels. Without hole
+  // filling the holes are left visible (alpha 0).
   t0 = Clock::now();
-  if (options.fill_holes) st.forced_texels = propagate_keys(ctx);
+  if (options.fill_holes) {
+    st.forced_texels = propagate_keys(ctx);
+    st.forced_texels += cover_from_nearest_patch(ctx, patches);
+  }
   st.seconds_holes += seconds_since(t0);
 
   // Resolve: the winner's (u, v, w) at the texel centre, then E and H.
@@ -708,8 +713,9 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   kept.reserve(patches.patches.size());
   for (std::size_t p = 0; p < patches.patches.size(); ++p) {
     const uint64_t n = won[p].load(std::memory_order_relaxed);
-    // Blend: a patch that gave weight to no texel retires (it may win none).
-    if (retire && (blend ? ctx.blend.contributed[p] == 0 : n == 0)) {
+    // Blend: a patch that gave weight to no texel retires, unless a forced
+    // texel names it.
+    if (retire && n == 0 && (!blend || ctx.blend.contributed[p] == 0)) {
       ++st.patches_retired;
       continue;
     }

@@ -157,8 +157,8 @@ namespace {
 
 // One frame of the shared Mantaflow dam break: a real, non-trivial mesh and
 // atlas; every chart texel gets exactly one live patch. A few newborns on
-// sharp creases do not keep their own centre (low Q_V there, or a remeshed
-// triangle standing across the fold); their texels take a neighbour's patch,
+// sharp creases do not keep their own centre (their centre triangle marked
+// folded); their texels are forced to a neighbour's or the nearest patch,
 // which must stay rare.
 TEST(RasterPipeline, DamBreakFrameFullCoverage) {
   const std::string path = LAPFLOW_SOURCE_DIR "/../shared/data/dam_break/dam_break.0040.ply";
@@ -172,22 +172,26 @@ TEST(RasterPipeline, DamBreakFrameFullCoverage) {
   const Box3 box = bounding_box(mesh);
   popt.radius = 0.06 * norm(box.size());
   WeightOptions wopt;
-  PatchSet patches;
-  seed_patches(q, 40, popt, SeedOptions{}, wopt, patches);
   const Exemplar ex = test::ramp_exemplar(64, 0.5f);
   const RasterExemplar rex = prepare_raster_exemplar(ex, 0.1);
-  RasterOptions ro;
-  ro.radius = popt.radius;
-  const FrameTextures out = rasterize_atlas(q, atlas, rex, ro, popt, wopt, 40, patches);
-  EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
-  EXPECT_LE(out.stats.forced_texels, out.stats.chart_texels / 1000);
-  EXPECT_LT(out.stats.patches_born, patches.patches.size());
-  std::set<float> live;
-  for (const Patch& p : patches.patches) live.insert(float(p.id));
-  const int N = atlas.resolution;
-  for (uint32_t t : atlas.texels.texel) {
-    ASSERT_EQ(out.color.pixels[std::size_t(t) * 4 + 3], 1.f);
-    ASSERT_TRUE(live.count(out.aov.at(int(t % N), int(t / N), 0)));
+  for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
+    SCOPED_TRACE(mode == RasterMode::Blend ? "blend" : "erosion");
+    PatchSet patches;
+    seed_patches(q, 40, popt, SeedOptions{}, wopt, patches);
+    RasterOptions ro;
+    ro.radius = popt.radius;
+    ro.mode = mode;
+    const FrameTextures out = rasterize_atlas(q, atlas, rex, ro, popt, wopt, 40, patches);
+    EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+    EXPECT_LE(out.stats.forced_texels, out.stats.chart_texels / 1000);
+    EXPECT_LT(out.stats.patches_born, patches.patches.size());
+    std::set<float> live;
+    for (const Patch& p : patches.patches) live.insert(float(p.id));
+    const int N = atlas.resolution;
+    for (uint32_t t : atlas.texels.texel) {
+      ASSERT_EQ(out.color.pixels[std::size_t(t) * 4 + 3], 1.f);
+      ASSERT_TRUE(live.count(out.aov.at(int(t % N), int(t / N), 0)));
+    }
   }
 }
 

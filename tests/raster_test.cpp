@@ -457,6 +457,77 @@ TEST(Raster, RejectsAnAtlasOfAnotherMesh) {
   }
 }
 
+// Every texel's AOV names a patch and reads that patch's affine map at the
+// texel's point (exact for the planar grid patches, extrapolated or not).
+void expect_named_with_own_map(const Scene& sc, const FrameTextures& out) {
+  const auto& tm = sc.f.atlas.texels;
+  const int N = sc.f.atlas.resolution;
+  double worst = 0;
+  for (std::size_t k = 0; k < tm.size(); ++k) {
+    const int x = int(tm.texel[k] % N), y = int(tm.texel[k] / N);
+    ASSERT_EQ(out.color.at(x, y, 3), 1.f);
+    const int id = int(out.aov.at(x, y, 0));
+    ASSERT_GE(id, 0);
+    const Vec2 uv = sc.spec(uint32_t(id)).uv_at(sc.f.texel_point(k));
+    worst = std::max({worst, std::abs(uv.x - out.aov.at(x, y, 1)), std::abs(uv.y - out.aov.at(x, y, 2))});
+  }
+  EXPECT_LT(worst, 1e-4);
+}
+
+TEST(Raster, ChartNoPatchReachesTakesTheNearestPatch) {
+  // Two charts; one patch on the left one; create_patch fails everywhere.
+  // The rest of the left chart takes neighbours' patches, the right chart
+  // (no covered texel to spread from) the nearest patch triangle in 3D.
+  for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
+    Scene sc;
+    sc.f = test::make_plane(8, 1.0, 96, true);
+    sc.ex = test::ramp_exemplar(32, 0.f);
+    sc.rex = prepared(sc.ex);
+    PatchSpec a;
+    a.centre = {0.3, 0.5, 0}, a.r = 0.15, a.half = 0.15, a.w0 = 1;
+    sc.add(a);
+    RasterOptions o;
+    o.mode = mode;
+    o.radius = 0.15;
+    const FrameTextures out = rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0,
+                                              [](const SurfacePoint&, uint32_t) { return std::optional<Patch>{}; },
+                                              TriangleLocator{}, sc.patches);
+    const RasterStats& st = out.stats;
+    EXPECT_EQ(st.covered_texels, st.chart_texels);
+    EXPECT_EQ(st.patches_born, 0u);
+    EXPECT_EQ(sc.patches.patches.size(), 1u);
+    EXPECT_EQ(st.texels_per_patch[0], st.chart_texels);
+    EXPECT_GT(st.forced_texels, st.chart_texels / 2);  // the whole right chart at least
+    EXPECT_LT(st.forced_texels, st.chart_texels);
+    expect_named_with_own_map(sc, out);
+  }
+}
+
+TEST(Raster, NewbornsThatKeepNothingStillCoverTheirHoles) {
+  // Every newborn is folded (delta = inf on all its triangles, as on a droplet
+  // smaller than a patch): none is drawn, yet every texel gets one of them.
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, 96, false);
+  sc.ex = test::ramp_exemplar(32, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = 0.2;
+  const PatchMaker base = sc.maker();
+  const PatchMaker folded = [&](const SurfacePoint& at, uint32_t id) {
+    std::optional<Patch> p = base(at, id);
+    p->triangle_delta.assign(p->triangles.size(), INFINITY);
+    return p;
+  };
+  RasterOptions o;
+  o.radius = sc.r;
+  const FrameTextures out =
+      rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, folded, TriangleLocator{}, sc.patches);
+  EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
+  EXPECT_EQ(out.stats.forced_texels, out.stats.chart_texels);
+  EXPECT_GT(out.stats.patches_born, 0u);
+  EXPECT_EQ(out.stats.distorted_triangles, 0u);  // counted for the first pass only (no patch then)
+  expect_named_with_own_map(sc, out);
+}
+
 // Blend mode (the 2019 baseline): colour = sum w_i c_i / sum w_i over the
 // covering patches, checked against the analytic (u, v, w) of two patches on
 // the ramp exemplar (colour = (u, v, 0.5)).
