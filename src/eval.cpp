@@ -187,6 +187,8 @@ FrameData load_frame(const BakeManifest& m, int frame) {
   f.frame = frame;
   const std::string obj = m.frame_file("obj", frame), color_path = m.frame_file("color", frame),
                     aov_path = m.frame_file("aov", frame);
+  if (!fs::exists(obj))
+    throw InputError(obj, "missing: the bake did not write this frame (pick the frames it has with --frames)", frame);
   if (!fs::exists(aov_path))
     throw InputError(m.dir, "the bake has no AOVs (" + fs::path(aov_path).filename().string() +
                                 " is missing): bake again with --aov to evaluate it", frame);
@@ -543,6 +545,7 @@ void frame_metrics(const FrameData& f, ExemplarAtScale& exemplar, double radius,
   m.distortion_texels = d.size();
   if (!d.empty()) {
     m.distortion_max = *std::max_element(d.begin(), d.end());
+    m.distortion_p99 = quantile(d, 0.99);
     m.distortion_p90 = quantile(d, 0.9);
     m.distortion_median = quantile(d, 0.5);
   }
@@ -768,6 +771,7 @@ const std::vector<MetricDef>& metric_defs() {
       {"drift", [](const FrameMetrics& m) { return m.drift; }},
       {"distortion_median", [](const FrameMetrics& m) { return m.distortion_median; }},
       {"distortion_p90", [](const FrameMetrics& m) { return m.distortion_p90; }},
+      {"distortion_p99", [](const FrameMetrics& m) { return m.distortion_p99; }},
       {"distortion_max", [](const FrameMetrics& m) { return m.distortion_max; }},
   };
   return defs;
@@ -887,6 +891,7 @@ std::string eval_report_json(const EvalReport& r) {
         {"distortion_texels", m.distortion_texels},
         {"distortion_median", number(m.distortion_median)},
         {"distortion_p90", number(m.distortion_p90)},
+        {"distortion_p99", number(m.distortion_p99)},
         {"distortion_max", number(m.distortion_max)},
         {"seconds", m.seconds},
     });
@@ -924,7 +929,7 @@ std::string eval_report_table(const EvalReport& r) {
                                 r.name, r.mode, r.dir, r.exemplar, r.resolution, r.radius, r.fps, r.rest_speed);
   out += fmt::format("{:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6} {:>8} {:>7} {:>7} {:>7}\n", "frame",
                      "cover%", "contrast", "hist W1", "SW", "flow50", "flow90", "pop%", "born", "died", "drift%",
-                     "delta50", "delta90", "deltamx");
+                     "delta50", "delta90", "delta99");
   auto pct = [](double v) { return std::isfinite(v) ? 100 * v : v; };
   auto row = [&](const std::string& label, double cov, double con, double hist, double sw, double f50, double f90,
                  double pop, double born, double died, double drift, double d50, double d90, double dmx) {
@@ -936,7 +941,7 @@ std::string eval_report_table(const EvalReport& r) {
   for (const FrameMetrics& m : r.frames)
     out += row(std::to_string(m.frame), m.coverage, m.contrast, m.histogram_distance, m.sliced_wasserstein,
                m.flow_median, m.flow_p90, m.popping, m.born ? double(*m.born) : kNoValue,
-               m.died ? double(*m.died) : kNoValue, m.drift, m.distortion_median, m.distortion_p90, m.distortion_max);
+               m.died ? double(*m.died) : kNoValue, m.drift, m.distortion_median, m.distortion_p90, m.distortion_p99);
   std::map<std::string, const MetricSummary*> s;
   for (const MetricSummary& x : r.summary) s[x.key] = &x;
   auto get = [&](const char* key, double MetricSummary::*field) { return s.count(key) ? s[key]->*field : kNoValue; };
@@ -946,7 +951,7 @@ std::string eval_report_table(const EvalReport& r) {
     out += row(label, get("coverage", field), get("contrast", field), get("histogram_distance", field),
                get("sliced_wasserstein", field), get("flow_median", field), get("flow_p90", field),
                get("popping", field), get("born", field), get("died", field), get("drift", field),
-               get("distortion_median", field), get("distortion_p90", field), get("distortion_max", field));
+               get("distortion_median", field), get("distortion_p90", field), get("distortion_p99", field));
   return out;
 }
 
@@ -963,14 +968,14 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
   const fs::path folder(dir);
   const std::string tag = fmt::format(".eval_plot_{}", ::getpid());
   const fs::path data = folder / (tag + ".dat"), script = folder / (tag + ".gp");
-  std::string text = "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax\n";
+  std::string text = "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax d99\n";
   auto v = [](double x) { return std::isfinite(x) ? fmt::format("{:.9g}", x) : std::string("NaN"); };
   for (const FrameMetrics& m : r.frames)
-    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
+    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
                         v(m.histogram_w1[0]), v(m.histogram_w1[1]), v(m.histogram_w1[2]), v(m.histogram_distance),
                         v(m.sliced_wasserstein), v(m.flow_median), v(m.flow_p90), v(m.popping),
                         v(m.born ? double(*m.born) : kNoValue), v(m.died ? double(*m.died) : kNoValue), v(m.drift),
-                        v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max));
+                        v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max), v(m.distortion_p99));
   write_text_atomically(data.string(), text);
 
   struct Plot {
@@ -1003,15 +1008,16 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
        fmt::format("{} using 1:($14*100) with linespoints title 'drift'", d),
        [](const FrameMetrics& m) { return m.drift; }},
       {"distortion.png", "Distortion delta = max(s1, 1/s2)", "delta",
-       lines({{15, "median"}, {16, "p90"}, {17, "max"}}),
+       lines({{15, "median"}, {16, "p90"}, {18, "p99"}}),
        [](const FrameMetrics& m) { return m.distortion_median; }},
   };
-  std::string gp = "set terminal pngcairo size 960,540 enhanced font 'sans,11'\nset grid\nset key outside right top\n"
+  std::string gp = "set terminal pngcairo size 960,540 noenhanced font 'sans,11'\nset grid\nset key outside right top\n"
                    "set xlabel 'frame'\nset datafile missing 'NaN'\n";
   // An explicit x range: one frame, or a metric with no value, leaves gnuplot none.
   const int first = r.frames.empty() ? 0 : r.frames.front().frame, last = r.frames.empty() ? 1 : r.frames.back().frame;
   gp += first < last ? fmt::format("set xrange [{}:{}]\n", first, last)
                      : fmt::format("set xrange [{}:{}]\n", first - 1, last + 1);
+  gp += fmt::format("set xtics {}\n", std::max(1, int(std::lround((last - first) / 10.0))));
   std::vector<std::string> written;
   for (const Plot& p : plots) {
     const std::string tmp = (folder / (tag + "." + p.file)).string();

@@ -173,6 +173,7 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_EQ(f1.distortion_texels, 5u);
   EXPECT_NEAR(f1.distortion_median, 2.0, 1e-5);
   EXPECT_NEAR(f1.distortion_p90, 4.0, 1e-5);
+  EXPECT_NEAR(f1.distortion_p99, 4.0, 1e-5);
   EXPECT_NEAR(f1.distortion_max, 4.0, 1e-5);
   // The first frame has nothing to compare with.
   EXPECT_TRUE(std::isnan(f1.popping));

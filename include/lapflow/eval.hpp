@@ -67,7 +67,7 @@ struct FrameMetrics {
   // Distortion: delta = max(s1, 1/s2) of the map (u,v)*2r -> surface,
   // estimated from neighbouring texels of one patch and chart.
   std::size_t distortion_texels = 0;
-  double distortion_median = kNoValue, distortion_p90 = kNoValue, distortion_max = kNoValue;
+  double distortion_median = kNoValue, distortion_p90 = kNoValue, distortion_p99 = kNoValue, distortion_max = kNoValue;
   double seconds = 0;
 };
 
