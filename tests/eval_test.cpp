@@ -79,8 +79,10 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
         const double u = (x + 0.5) / 4, v = 1 - (y + 0.5) / 4;
         float grey = 0.5f, alpha = 0.f, id = -1.f, pu = 0, pv = 0;
         if (in_a(x, y)) grey = 0.2f, alpha = 1, id = 7, pu = float(u / 2 / (2 * kR)), pv = float(v / (2 * kR));
-        if (in_b(x, y) && !uncovered(x, y)) grey = 0.8f, alpha = 1, id = float(tf.b_patch), pu = float(4 * kSqrt3 * u / (2 * kR)),
-                                                 pv = float(4 * kSqrt3 * v / (2 * kR));
+        if (in_b(x, y) && !uncovered(x, y)) {
+          grey = 0.8f, alpha = 1, id = float(tf.b_patch);
+          pu = float(4 * kSqrt3 * u / (2 * kR)), pv = float(4 * kSqrt3 * v / (2 * kR));
+        }
         for (int c = 0; c < 3; ++c) color.at(x, y, c) = grey;
         color.at(x, y, 3) = alpha;
         aov.at(x, y, 0) = id;
