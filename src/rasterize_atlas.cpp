@@ -350,8 +350,10 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, c
     double ring[3];
     for (int i = 0; i < 3; ++i) ring[i] = -norm(e[i]) / area2;
     bool leak = leaky[k] || !t.ring;  // no ring test: nothing to look for
-    const int ry0 = std::max(0, t.y0 - 1), ry1 = std::min(Nm1, t.y1 + 1);
-    const int rx0 = std::max(0, t.x0 - 1), rx1 = std::min(Nm1, t.x1 + 1);
+    // The ring around the box only matters while a leak is still looked for.
+    const int pad = leak ? 0 : 1;
+    const int ry0 = std::max(0, t.y0 - pad), ry1 = std::min(Nm1, t.y1 + pad);
+    const int rx0 = std::max(0, t.x0 - pad), rx1 = std::min(Nm1, t.x1 + pad);
     for (int y = ry0; y <= ry1; ++y) {
       const bool in_rows = y >= t.y0 && y <= t.y1;
       int32_t* row = &local[std::size_t(y - by0) * W - bx0];
