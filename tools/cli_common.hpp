@@ -80,6 +80,8 @@ void add_atlas_command(CLI::App& app);
 void add_patches_command(CLI::App& app);
 void add_bake_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
+/// `lapflow preview DIR --width W --height H` with every other option at its default.
+void preview_bake(const std::string& dir, int width, int height);
 void add_preview_command(CLI::App& app);
 void add_feature_map_command(CLI::App& app);
 

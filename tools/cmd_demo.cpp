@@ -21,6 +21,7 @@ struct DemoCommandOptions {
   double fps = 24;
   double period = 2;
   bool bake = true;
+  bool preview = true;
   std::string exemplar = "pebbles";
   int atlas_resolution = 2048;
   double radius = 0.03;
@@ -69,6 +70,10 @@ void run_demo(const DemoCommandOptions& o) {
   b.patch.radius = o.radius;
   b.atlas.resolution = o.atlas_resolution;
   bake_with_progress(b);
+  if (!o.preview) return;
+  // What a user looks at first: a picture of every baked frame (and an MP4
+  // when ffmpeg is installed) in OUT/bake/preview/.
+  preview_bake(b.out_dir, 960, 540);
 }
 
 }  // namespace
@@ -118,6 +123,8 @@ void add_demo_command(CLI::App& app) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag("!--no-bake", o.bake, "Only write the PLY sequence; do not bake it");
+  cmd->add_flag("!--no-preview", o.preview,
+                "Do not render the baked frames (by default: 960x540 PNGs and an MP4 in OUT/bake/preview/)");
   cmd->add_option("--exemplar", o.exemplar, "Exemplar for the bake: a shipped name or NAME.color.png")
       ->capture_default_str();
   cmd->add_option("--atlas-resolution", o.atlas_resolution, "Atlas width = height of the bake, in texels")

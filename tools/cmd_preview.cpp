@@ -233,6 +233,14 @@ void run_preview(PreviewCli& c) {
 
 }  // namespace
 
+void preview_bake(const std::string& dir, int width, int height) {
+  PreviewCli c;
+  c.dir = dir;
+  c.width = width;
+  c.height = height;
+  run_preview(c);
+}
+
 void add_preview_command(CLI::App& app) {
   static PreviewCli c;
   CLI::App* cmd = app.add_subcommand("preview", "Ray-traced pictures (and an MP4) of baked frames");
