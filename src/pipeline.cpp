@@ -119,8 +119,7 @@ struct FrameWrite {
   PatchSet patches;  ///< a copy, with dump_patches only
 };
 
-/// Writes frame f's files (each atomically), the independent ones
-/// concurrently. Returns the seconds it took.
+/// Writes frame f's files, each atomically. Returns the seconds it took.
 double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
   const auto t = Clock::now();
   const std::string color = frame_file(o, "color", f, "exr"), disp = frame_file(o, "disp", f, "exr");
@@ -143,19 +142,9 @@ double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
     write_uv_mesh_obj(frame_file(o, "", f, "obj"), w.surface->mesh, w.atlas, material);
   });
   if (o.dump_patches) jobs.push_back([&] { write_patches_ply(frame_file(o, "patches", f, "ply"), w.patches); });
-  // Each job catches its own error; the first (in job order) is rethrown.
-  std::vector<std::exception_ptr> errors(jobs.size());
-  parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      try {
-        jobs[i]();
-      } catch (...) {
-        errors[i] = std::current_exception();
-      }
-    }
-  }, 1);
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  // One after the other on this thread (OpenEXR compresses on its own
+  // pool): the writer must not take the TBB workers the next frame needs.
+  for (const auto& job : jobs) job();
   return seconds_since(t);
 }
 
@@ -239,19 +228,20 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
     std::future<std::shared_ptr<SurfaceFrame>> next;
     auto start_reading = [&](std::size_t i) {
       if (i < frames.size())
-        next = std::async(std::launch::async, [&o, &meshes, f = frames[i]] {
+        next = std::async(o.prefetch_read ? std::launch::async : std::launch::deferred, [&o, &meshes, f = frames[i]] {
           return std::shared_ptr<SurfaceFrame>(load_frame(o, meshes, f));
         });
     };
     start_reading(0);
     for (std::size_t i = 0; i < frames.size(); ++i) {
       const int f = frames[i];
+      if (!o.prefetch_read && i > 0) start_reading(i);
       FrameStats st;
       st.frame = f;
       const auto t_frame = Clock::now();
       auto t = Clock::now();
       std::shared_ptr<SurfaceFrame> cur = next.get();
-      start_reading(i + 1);
+      if (o.prefetch_read) start_reading(i + 1);
       st.seconds_read = seconds_since(t);  // the wait for the frame read in the background
       st.triangles = cur->mesh.triangle_count();
       st.vertices = cur->mesh.vertex_count();
@@ -309,6 +299,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       pending_stats = st;
       loop_seconds = compute_seconds;
       pending = std::async(std::launch::async, [&o, job, f] { return write_frame(o, *job, f); });
+      if (!o.background_write) finish_pending();
       prev = std::move(cur);
     }
     finish_pending();

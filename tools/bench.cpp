@@ -63,6 +63,12 @@ BakeOptions base_options(const std::string& out) {
   o.exemplar_displacement = source_dir() + "/exemplars/pebbles.disp.png";
   o.out_dir = out;
   o.name = "bench";
+  // LAPFLOW_BENCH_IO=serial|prefetch|overlap: read, compute and write one
+  // after the other; read ahead (the default); read ahead and write behind.
+  if (const char* io = std::getenv("LAPFLOW_BENCH_IO")) {
+    o.prefetch_read = std::string(io) != "serial";
+    o.background_write = std::string(io) == "overlap";
+  }
   return o;
 }
 

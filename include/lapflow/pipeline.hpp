@@ -37,6 +37,12 @@ struct BakeOptions {
   bool aov = false;
   bool dump_patches = false;
   ExrOptions exr;
+  /// Read the next frame (mesh, Embree scene, velocity band) on another
+  /// thread while the current one computes.
+  bool prefetch_read = true;
+  /// Write each frame's files on another thread while the next frame
+  /// computes: one more frame of images in memory.
+  bool background_write = false;
   // Stages
   uint64_t seed = 1;
   PatchOptions patch;                     ///< patch.radius = r in metres (0 = automatic)
