@@ -142,9 +142,27 @@ double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
     write_uv_mesh_obj(frame_file(o, "", f, "obj"), w.surface->mesh, w.atlas, material);
   });
   if (o.dump_patches) jobs.push_back([&] { write_patches_ply(frame_file(o, "patches", f, "ply"), w.patches); });
-  // One after the other on this thread (OpenEXR compresses on its own
-  // pool): the writer must not take the TBB workers the next frame needs.
-  for (const auto& job : jobs) job();
+  if (o.background_write) {
+    // One after the other on this thread (OpenEXR compresses on its own
+    // pool): the writer must not take the TBB workers the next frame needs.
+    for (const auto& job : jobs) job();
+    return seconds_since(t);
+  }
+  // Nothing else runs: the files are written concurrently (OIIO converts
+  // each image on one thread). Each job keeps its own error; the first in
+  // job order is rethrown.
+  std::vector<std::exception_ptr> errors(jobs.size());
+  parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      try {
+        jobs[i]();
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    }
+  }, 1);
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
   return seconds_since(t);
 }
 
