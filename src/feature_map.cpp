@@ -138,28 +138,23 @@ Image gaussian_blur(const Image& img, double sigma) {
   for (int i = -radius; i <= radius; ++i) sum += kernel[std::size_t(i + radius)] = float(std::exp(-0.5 * i * i / (sigma * sigma)));
   for (float& k : kernel) k = float(k / sum);
   const int w = img.width, h = img.height, ch = img.channels;
-  // Horizontal then vertical pass, each row/column written by one task.
+  // Horizontal then vertical pass (clamped at the borders), each row written by one task.
+  auto pass = [&](const Image& src, Image& dst, int dx, int dy) {
+    parallel_for(std::size_t(h), [&](std::size_t b, std::size_t e) {
+      for (int y = int(b); y < int(e); ++y)
+        for (int x = 0; x < w; ++x)
+          for (int c = 0; c < ch; ++c) {
+            float acc = 0;
+            for (int i = -radius; i <= radius; ++i)
+              acc += kernel[std::size_t(i + radius)] *
+                     src.at(std::clamp(x + i * dx, 0, w - 1), std::clamp(y + i * dy, 0, h - 1), c);
+            dst.at(x, y, c) = acc;
+          }
+    }, 4);
+  };
   Image tmp(w, h, ch), out(w, h, ch);
-  parallel_for(std::size_t(h), [&](std::size_t b, std::size_t e) {
-    for (int y = int(b); y < int(e); ++y)
-      for (int x = 0; x < w; ++x)
-        for (int c = 0; c < ch; ++c) {
-          float acc = 0;
-          for (int i = -radius; i <= radius; ++i)
-            acc += kernel[std::size_t(i + radius)] * img.at(std::clamp(x + i, 0, w - 1), y, c);
-          tmp.at(x, y, c) = acc;
-        }
-  }, 4);
-  parallel_for(std::size_t(h), [&](std::size_t b, std::size_t e) {
-    for (int y = int(b); y < int(e); ++y)
-      for (int x = 0; x < w; ++x)
-        for (int c = 0; c < ch; ++c) {
-          float acc = 0;
-          for (int i = -radius; i <= radius; ++i)
-            acc += kernel[std::size_t(i + radius)] * tmp.at(x, std::clamp(y + i, 0, h - 1), c);
-          out.at(x, y, c) = acc;
-        }
-  }, 4);
+  pass(img, tmp, 1, 0);
+  pass(tmp, out, 0, 1);
   return out;
 }
 

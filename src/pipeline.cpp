@@ -85,13 +85,6 @@ std::unique_ptr<SurfaceFrame> load_frame(const BakeOptions& o, const FramePatter
   return s;
 }
 
-std::string frame_file(const BakeOptions& o, const std::string& kind, int frame, const std::string& ext) {
-  char digits[16];
-  std::snprintf(digits, sizeof digits, "%04d", frame);
-  const std::string mid = kind.empty() ? "" : kind + ".";
-  return (fs::path(o.out_dir) / (o.name + "." + mid + digits + "." + ext)).string();
-}
-
 nlohmann::json stats_json(const FrameStats& s) {
   return {{"frame", s.frame},
           {"triangles", s.triangles},
@@ -120,9 +113,9 @@ struct FrameWrite {
 };
 
 /// Writes frame f's files, each atomically. Returns the seconds it took.
-double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
+double write_frame(const BakeOptions& o, const BakeManifest& names, const FrameWrite& w, int f) {
   const auto t = Clock::now();
-  const std::string color = frame_file(o, "color", f, "exr"), disp = frame_file(o, "disp", f, "exr");
+  const std::string color = names.frame_file("color", f), disp = names.frame_file("disp", f);
   std::vector<std::function<void()>> jobs;
   jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
   jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
@@ -131,7 +124,7 @@ double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
       // Data: float, and never lossy.
       const ExrCompression lossless =
           o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
-      write_exr(frame_file(o, "aov", f, "exr"), w.textures.aov, {"patch_id", "u", "v", "w"},
+      write_exr(names.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
                 {ExrPixelType::Float, lossless});
     });
   jobs.push_back([&] {
@@ -139,9 +132,9 @@ double write_frame(const BakeOptions& o, const FrameWrite& w, int f) {
     material.name = o.name;
     material.color_texture = fs::path(color).filename().string();
     material.displacement_texture = fs::path(disp).filename().string();
-    write_uv_mesh_obj(frame_file(o, "", f, "obj"), w.surface->mesh, w.atlas, material);
+    write_uv_mesh_obj(names.frame_file("obj", f), w.surface->mesh, w.atlas, material);
   });
-  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(frame_file(o, "patches", f, "ply"), w.patches); });
+  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names.frame_file("patches", f), w.patches); });
   if (o.background_write) {
     // One after the other on this thread (OpenEXR compresses on its own
     // pool): the writer must not take the TBB workers the next frame needs.
@@ -221,7 +214,9 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   std::shared_ptr<SurfaceFrame> prev;
   std::string stats_text;
   const std::string stats_path = (fs::path(o.out_dir) / (o.name + ".stats.jsonl")).string();
-  write_bake_manifest(make_bake_manifest(o, frames), bake_manifest_path(o.out_dir, o.name));
+  // The manifest also names every output file (BakeManifest::frame_file).
+  const BakeManifest manifest = make_bake_manifest(o, frames);
+  write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
 
   // The frame being written in the background, if any.
   std::future<double> pending;
@@ -316,7 +311,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       finish_pending();  // at most one frame in flight: bounds memory to two frames of images
       pending_stats = st;
       loop_seconds = compute_seconds;
-      pending = std::async(std::launch::async, [&o, job, f] { return write_frame(o, *job, f); });
+      pending = std::async(std::launch::async, [&o, &manifest, job, f] { return write_frame(o, manifest, *job, f); });
       if (!o.background_write) finish_pending();
       prev = std::move(cur);
     }
