@@ -1,0 +1,1 @@
+// Isotropic remeshing of a new patch on plain arrays (work in progress).
