@@ -1,10 +1,13 @@
 // Images in and out. OpenImageIO lives here and nowhere else; the rest of
 // lapflow sees only lapflow::Image (interleaved linear float, row 0 on top).
+#include <Imath/half.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imageio.h>
+#include <immintrin.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -119,6 +122,35 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
   if (!out->close()) throw OutputError(path + ": write failed: " + one_line(out->geterror()));
 }
 
+// float -> half, round to nearest even (what Imath::half and OIIO's own
+// conversion do), eight at a time with F16C where the CPU has it.
+__attribute__((target("avx,f16c"))) void to_half_f16c(const float* in, uint16_t* out, std::size_t n) {
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i),
+                     _mm256_cvtps_ph(_mm256_loadu_ps(in + i), _MM_FROUND_TO_NEAREST_INT));
+  for (; i < n; ++i) out[i] = Imath::half(in[i]).bits();
+}
+
+void to_half_portable(const float* in, uint16_t* out, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) out[i] = Imath::half(in[i]).bits();
+}
+
+// OIIO converts a whole image to half on one thread before OpenEXR
+// compresses it on its pool; converting here first, on all threads, takes
+// that serial step out of every frame's write (0.2 s at 6144^2 RGBA).
+std::vector<uint16_t> to_half(const std::vector<float>& in) {
+  std::vector<uint16_t> out(in.size());
+  static const bool f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+  parallel_for(in.size(), [&](std::size_t b, std::size_t e) {
+    if (f16c)
+      to_half_f16c(in.data() + b, out.data() + b, e - b);
+    else
+      to_half_portable(in.data() + b, out.data() + b, e - b);
+  }, 1 << 16);
+  return out;
+}
+
 }  // namespace
 
 Image read_image(const std::string& path, ColorSpace space) {
@@ -231,6 +263,13 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
   spec.attribute("Software", "lapflow");
   // OpenEXR keeps its own thread pool, separate from OIIO's "threads".
   OIIO::attribute("exr_threads", thread_count());
+  if (options.type == ExrPixelType::Half) {
+    const std::vector<uint16_t> half = to_half(img.pixels);
+    write_atomically(path, [&](const std::string& tmp) {
+      write_oiio(path, tmp, spec, OIIO::TypeDesc::HALF, half.data());
+    });
+    return;
+  }
   write_atomically(path, [&](const std::string& tmp) {
     write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
   });

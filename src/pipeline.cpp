@@ -1,9 +1,11 @@
 // The bake: one short frame loop over the stages (ALGORITHM.md steps 1-10).
 #include "lapflow/pipeline.hpp"
 
+#include <malloc.h>
 #include <sys/resource.h>
 
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <exception>
 #include <filesystem>
@@ -27,6 +29,13 @@ double peak_rss_mb() {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   return double(usage.ru_maxrss) / 1024.0;  // Linux reports KiB
+}
+
+void keep_freed_memory_for_reuse() {
+  // No mmap'd chunks (each one's pages are zeroed by the kernel again after
+  // every free), and never trim the heap's top back to the kernel.
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, INT_MAX);
 }
 
 namespace {

@@ -49,6 +49,28 @@ TEST(ImageIo, ExrHalfRoundTripWithinHalfPrecision) {
   }
 }
 
+TEST(ImageIo, ExrHalfIsRoundedToNearestEven) {
+  // write_exr converts to half itself (F16C where the CPU has it, on all
+  // threads): every value must be the IEEE round-to-nearest-even half, the
+  // conversion OIIO and Imath do, including ties, subnormals, the top of the
+  // half range and negative zero (read_image refuses infinities).
+  TempDir dir("image");
+  std::vector<float> values = {0.f, -0.f, 1.f, -1.f, 65504.f, 65519.f, -65519.f, 6.1e-5f, 5.96e-8f, 2.98e-8f,
+                               1e-9f, 0.1f, 1.f / 3.f, 1.00048828125f /* a tie: 1 + 2^-11 */,
+                               1.00146484375f /* a tie rounding up: 1 + 3 * 2^-11 */, 3.14159f, 2047.5f};
+  for (int i = 0; i < 2000; ++i) values.push_back(std::ldexp(float((i * 7919) % 4093) / 4093.f, (i % 40) - 24) * (i % 3 ? 1 : -1));
+  Image img(int(values.size()), 1, 1);
+  img.pixels = values;
+  write_exr(dir / "h.exr", img, {"Y"}, {ExrPixelType::Half, ExrCompression::Piz});
+  const Image back = read_image(dir / "h.exr");
+  ASSERT_EQ(back.pixels.size(), values.size());
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const float expect = float(static_cast<_Float16>(values[i]));  // GCC: IEEE binary16, round to nearest even
+    EXPECT_TRUE(back.pixels[i] == expect && std::signbit(back.pixels[i]) == std::signbit(expect))
+        << "value " << values[i] << " read back as " << back.pixels[i] << ", expected " << expect;
+  }
+}
+
 TEST(ImageIo, ExrFloatIsExactAndDwaaIsClose) {
   TempDir dir("image");
   const Image img = pattern(64, 32, 3, 0.f, 1.f);

@@ -117,6 +117,7 @@ void header() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  lapflow::keep_freed_memory_for_reuse();  // as the lapflow CLI does
   const std::vector<std::string> args(argv + 1, argv + argc);
   const std::string data = source_dir() + "/../shared/data";
   const std::string self = fs::read_symlink("/proc/self/exe").string();

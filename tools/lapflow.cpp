@@ -10,9 +10,11 @@
 #include "cli_common.hpp"
 #include "scene_file.hpp"
 #include "lapflow/errors.hpp"
+#include "lapflow/pipeline.hpp"
 
 int main(int argc, char** argv) {
   using namespace lapflow;
+  keep_freed_memory_for_reuse();  // frame buffers are reused across frames (pipeline.hpp)
   CLI::App app{
       "lapflow covers an animated liquid surface (a new mesh every frame plus a velocity field) with small\n"
       "deformable texture patches that ride the flow, erodes each patch where it gets too distorted, and\n"

@@ -83,4 +83,14 @@ void bake(const BakeOptions& options, const std::function<void(const FrameStats&
 /// Peak resident memory of this process so far, in MiB.
 double peak_rss_mb();
 
+/// Makes the C library keep freed large blocks for reuse instead of returning
+/// them to the kernel. A bake allocates the same ~2 GB of frame buffers every
+/// frame at 6144^2 (images, texel maps, EXR conversion buffers); glibc serves
+/// blocks over 32 MiB with fresh mmap pages, which the kernel zeroes on first
+/// touch, page by page, every frame (a fifth of the raster's time). After this
+/// call they come from the heap and are reused. Process-wide: call it once
+/// from main(), before any thread starts (the lapflow CLI and the benchmark
+/// do). Peak memory is unchanged; memory freed between frames stays mapped.
+void keep_freed_memory_for_reuse();
+
 }  // namespace lapflow
