@@ -10,11 +10,15 @@ VelocityField vertex_velocity_field(const SurfaceQuery& query) {
   if (!mesh.has_velocities() || mesh.empty()) return [](const Vec3&) { return Vec3{}; };
   // Embree's point query only culls by its radius: an unbounded query visits
   // many far triangles before the radius shrinks. Points sampled here are
-  // near the surface (a patch vertex moved by a fraction of a frame), so try
-  // a radius of a few edges first and widen only when nothing is that close.
+  // near the surface (a patch vertex moved by a fraction of a frame, most
+  // often one lying on this very surface), so try a radius of a fraction of
+  // an edge first and widen only when nothing is that close. The closest
+  // point within a small radius, when there is one, is the closest point.
+  // (A first radius of 2 edges made Embree test ~18 triangles per query.)
   const double near = 2 * mean_edge_length(mesh) + 1e-9 * norm(bounding_box(mesh).size());
   return [&query, &mesh, near](const Vec3& p) {
-    ClosestHit hit = query.closest(p, near);
+    ClosestHit hit = query.closest(p, near / 16);
+    if (!hit.found) hit = query.closest(p, near);
     if (!hit.found) hit = query.closest(p, 8 * near);
     if (!hit.found) hit = query.closest(p, INFINITY);
     if (!hit.found) return Vec3{};
