@@ -371,7 +371,27 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, c
     leaky[k] = leak && t.ring ? 1 : leaky[k];
   }
   const std::size_t N = std::size_t(ctx.N);
+  // Consecutive rows of the box are N texels apart in the index, and their
+  // chart texels far apart in the key and triangle arrays: too far for the
+  // hardware prefetcher, so every row would start with cache misses in all
+  // three. Ask for the index row two ahead and for the keys and triangles of
+  // the next row (whose index row is in cache by then).
+  auto prefetch_rows = [&](int y) {
+    if (y + 2 <= by1)
+      for (int x = bx0; x <= bx1 + 15; x += 16) __builtin_prefetch(&ctx.index[std::size_t(y + 2) * N + std::min(x, bx1)]);
+    if (y + 1 > by1) return;
+    const int32_t* next = &ctx.index[std::size_t(y + 1) * N];
+    int a = bx0, b = bx1;
+    while (a <= b && next[a] < 0) ++a;
+    while (b >= a && next[b] < 0) --b;
+    if (a > b) return;
+    // Pixels in row order are texels in index order: [next[a], next[b]] is
+    // one contiguous run of each array.
+    for (int32_t i = next[a]; i <= next[b] + 7; i += 8) sink.prefetch(std::min(i, next[b]));
+    for (int32_t i = next[a]; i <= next[b] + 15; i += 16) __builtin_prefetch(&tri_of[std::min(i, next[b])]);
+  };
   for (int y = by0; y <= by1; ++y) {
+    prefetch_rows(y);
     const int32_t* lrow = &local[std::size_t(y - by0) * W - bx0];
     const int32_t* irow = &ctx.index[std::size_t(y) * N];
     for (int x = bx0; x <= bx1; ++x) {
@@ -399,6 +419,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, c
 // Erosion and Advect: each texel keeps the smallest key by atomic min.
 struct KeySink {
   std::vector<uint64_t>& keys;
+  void prefetch(int32_t idx) const { __builtin_prefetch(&keys[idx]); }
   bool taken(int32_t idx, uint64_t key) const {
     return std::atomic_ref<uint64_t>(keys[idx]).load(std::memory_order_relaxed) <= key;
   }
@@ -413,6 +434,7 @@ struct KeySink {
 // Blend: every texel the patch covers is collected (raster_blend.cpp sums them).
 struct SampleSink {
   std::vector<BlendSample>& out;
+  void prefetch(int32_t) const {}
   bool taken(int32_t, uint64_t) const { return false; }
   void put(int32_t idx, uint64_t key, double u, double v, double w) {
     out.push_back({idx, uint32_t(key & 0xffffffffu), u, v, w});
@@ -655,11 +677,20 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   sample(exemplar.mips, 0.5, 0.5, 1e9, fallback);
   std::vector<std::atomic<uint64_t>> won(patches.patches.size());
   for (auto& a : won) a.store(0, std::memory_order_relaxed);
-  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
-    uint64_t last_key = kNoKey;
-    int last_tri = -1;
-    bool last_ok = false, last_same_chart = false;
+  // A winner's pixel-space triangle, for texels of one chart (same_chart)
+  // or of one fluid triangle. Texels come in row order, so a patch triangle
+  // returns on the next rows: a small direct-mapped cache of them saves
+  // most of the recomputation (winner_pixels is a pure function of these).
+  struct Winner {
+    uint64_t key = kNoKey;
+    int tri = -1, chart = -1;
+    bool ok = false, same_chart = false;
     Bary bary;
+  };
+  constexpr int kWinnerCacheBits = 8;
+  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
+    std::vector<Winner> cache(std::size_t(1) << kWinnerCacheBits);
+    const Winner* cur = nullptr;
     Vec2 P[3];
     std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run
     uint64_t run = 0;
@@ -676,15 +707,22 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
         const Patch& patch = patches.patches[p];
         // Same-chart winners do not depend on the texel's triangle: reuse.
         const int tri = tm.triangle[i];
-        if (key != last_key || (last_same_chart ? atlas.chart_of_triangle[tri] != atlas.chart_of_triangle[last_tri]
-                                                : last_tri != tri)) {
-          last_ok = winner_pixels(ctx, patch, ti, tm.triangle[i], P, &last_same_chart) && bary.init(P);
-          last_key = key;
-          last_tri = tm.triangle[i];
+        auto matches = [&](const Winner& w) {
+          return w.key == key && (w.same_chart ? atlas.chart_of_triangle[tri] == w.chart : w.tri == tri);
+        };
+        if (!cur || !matches(*cur)) {
+          Winner& slot = cache[(key * 0x9E3779B97F4A7C15ull) >> (64 - kWinnerCacheBits)];
+          if (!matches(slot)) {
+            slot.key = key;
+            slot.tri = tri;
+            slot.chart = atlas.chart_of_triangle[tri];
+            slot.ok = winner_pixels(ctx, patch, ti, tri, P, &slot.same_chart) && slot.bary.init(P);
+          }
+          cur = &slot;
         }
-        if (last_ok) {
+        if (cur->ok) {
           double l0, l1, l2;
-          bary.at(x, y, l0, l1, l2);
+          cur->bary.at(x, y, l0, l1, l2);
           const Tri& t = patch.triangles[ti];
           const double u = l0 * patch.rest_uv[t[0]].x + l1 * patch.rest_uv[t[1]].x + l2 * patch.rest_uv[t[2]].x;
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
@@ -711,8 +749,17 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     }
     if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
   }, 1 << 12);
-  st.covered_texels = 0;
-  for (uint64_t k : ctx.keys) st.covered_texels += k != kNoKey;
+  {
+    constexpr std::size_t kChunk = std::size_t(1) << 16;
+    std::vector<std::size_t> covered((ctx.keys.size() + kChunk - 1) / kChunk, 0);
+    parallel_for(covered.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t c = b; c < e; ++c)
+        for (std::size_t i = c * kChunk; i < std::min(ctx.keys.size(), (c + 1) * kChunk); ++i)
+          covered[c] += ctx.keys[i] != kNoKey;
+    }, 1);
+    st.covered_texels = 0;
+    for (std::size_t c : covered) st.covered_texels += c;
+  }
   st.seconds_resolve = seconds_since(t0);
 
   // Step 9, after hole filling so a newborn patch that covered nothing goes too.
