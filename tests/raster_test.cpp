@@ -13,6 +13,7 @@
 #include "lapflow/parallel.hpp"
 #include "lapflow/raster.hpp"
 #include "raster_fixture.hpp"
+#include "raster_internal.hpp"
 
 namespace lapflow {
 namespace {
@@ -669,6 +670,72 @@ TEST(RasterBlend, SameImagesForOneAndTwoThreads) {
   EXPECT_TRUE(a.color.pixels == b.color.pixels);
   EXPECT_TRUE(a.displacement.pixels == b.displacement.pixels);
   EXPECT_TRUE(a.aov.pixels == b.aov.pixels);
+}
+
+}  // namespace
+}  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// The gutter passes by their definition: every empty pixel of the whole
+// image, each pass, takes the filled 8-neighbour whose source is nearest
+// (ties to the lowest source), neighbours filled this pass not counting.
+std::vector<int32_t> reference_gutter_passes(std::vector<int32_t> s, int N, int gutter) {
+  auto d2 = [N](int64_t a, int64_t b) {
+    const int64_t dx = a % N - b % N, dy = a / N - b / N;
+    return dx * dx + dy * dy;
+  };
+  for (int pass = 0; pass < gutter; ++pass) {
+    std::vector<int32_t> next = s;
+    for (int y = 0; y < N; ++y)
+      for (int x = 0; x < N; ++x) {
+        const int64_t i = int64_t(y) * N + x;
+        if (s[i] >= 0) continue;
+        int32_t best = -1;
+        int64_t best_d = INT64_MAX;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
+            const int32_t c = s[std::size_t(yy) * N + xx];
+            if (c < 0) continue;
+            const int64_t d = d2(i, c);
+            if (d < best_d || (d == best_d && c < best)) best = c, best_d = d;
+          }
+        next[i] = best;
+      }
+    s = next;
+  }
+  return s;
+}
+
+TEST(Raster, GutterPassesMatchTheirDefinition) {
+  // dilate_sources visits only the pixels next to filled ones, 64 at a time:
+  // it must give every pixel within the gutter the source the plain
+  // whole-image passes give. Sizes around the 64-pixel word boundaries.
+  for (int N : {5, 63, 64, 65, 130}) {
+    for (int gutter : {1, 3, 6}) {
+      std::vector<int32_t> source(std::size_t(N) * N, -1);
+      // Blobs and single pixels, deterministic.
+      for (std::size_t i = 0; i < source.size(); ++i) {
+        const uint64_t h = hash64(uint64_t(N), uint64_t(gutter), i);
+        const int x = int(i % N), y = int(i / N);
+        const bool blob = (x / 9 + y / 7) % 4 == 0 && (x % 9) < 5;
+        if (blob || h % 97 == 0) source[i] = int32_t(i);
+      }
+      const std::vector<int32_t> expect = reference_gutter_passes(source, N, gutter);
+      std::vector<int32_t> got = source;
+      detail::dilate_sources(got, N, gutter);
+      std::size_t compared = 0;
+      for (std::size_t i = 0; i < got.size(); ++i) {
+        if (expect[i] < 0) continue;  // beyond the gutter: the row/column fill, not compared here
+        ASSERT_EQ(got[i], expect[i]) << "N " << N << " gutter " << gutter << " pixel " << i;
+        ++compared;
+      }
+      EXPECT_GT(compared, std::size_t(N));
+    }
+  }
 }
 
 }  // namespace
