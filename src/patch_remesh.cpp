@@ -72,6 +72,21 @@ class ArrayRemesher {
     for (int h : ring) n = n + face_normal(h / 3);
     return n;
   }
+  // Whether an edge joins u and w (walks u's fan without storing it).
+  bool joined(int u, int w) const {
+    const int start = out_he_[u];
+    int h = start;
+    do {
+      if (to(h) == w || origin_[prev_he(h)] == w) return true;
+      h = twin_[prev_he(h)];
+    } while (h >= 0 && h != start);
+    if (h >= 0) return false;  // went all the way round
+    for (h = start; twin_[h] >= 0;) {  // the rest of a border fan
+      h = next_he(twin_[h]);
+      if (to(h) == w || origin_[prev_he(h)] == w) return true;
+    }
+    return false;
+  }
   void split(int h, double t);  // new vertex at origin + t (target - origin)
   bool collapse_allowed(int h, const Vec3& q, double high2);
   // Requires ring_a_ to hold the ring of origin(h) (collapse_allowed leaves it there).
@@ -93,7 +108,6 @@ class ArrayRemesher {
   std::vector<uint32_t> stamp_;
   uint32_t stamp_now_ = 0;
   std::vector<std::pair<double, int>> queue_;
-  std::vector<std::pair<uint64_t, int>> keys_;
 };
 
 void ArrayRemesher::ring(int v, std::vector<int>& out) const {
@@ -120,29 +134,35 @@ bool ArrayRemesher::build(const PatchMesh& m) {
   twin_.assign(3 * std::size_t(nt), -1);
   out_he_.assign(nv, -1);
   border_.assign(nv, 0);
-  keys_.clear();
+  // Twins through the outgoing halfedges of each vertex (counting sort by
+  // origin): the twin of a -> b is the halfedge b -> a.
+  valence_.assign(nv + 1, 0);
   for (int t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) {
       const int a = m.triangles[t][k], b = m.triangles[t][(k + 1) % 3];
       if (a < 0 || a >= nv || b < 0 || b >= nv || a == b) return false;
       origin_[3 * t + k] = a;
       out_he_[a] = 3 * t + k;
-      keys_.push_back({(uint64_t(std::min(a, b)) << 32) | uint32_t(std::max(a, b)), 3 * t + k});
+      ++valence_[a + 1];
     }
-  std::sort(keys_.begin(), keys_.end());
-  for (std::size_t i = 0; i < keys_.size();) {
-    std::size_t j = i;
-    while (j < keys_.size() && keys_[j].first == keys_[i].first) ++j;
-    if (j - i > 2) return false;  // non-manifold edge
-    if (j - i == 2) {
-      const int h = keys_[i].second, g = keys_[i + 1].second;
-      if (origin_[h] == origin_[g]) return false;  // inconsistent orientation
-      twin_[h] = g, twin_[g] = h;
+  for (int v = 0; v < nv; ++v) valence_[v + 1] += valence_[v];
+  nb_a_.resize(3 * std::size_t(nt));  // halfedges by origin
+  nb_b_.assign(valence_.begin(), valence_.end() - 1);
+  for (int h = 0; h < 3 * nt; ++h) nb_a_[nb_b_[origin_[h]]++] = h;
+  for (int h = 0; h < 3 * nt; ++h) {
+    const int a = origin_[h], b = to(h);
+    int found = -1, back = 0, forth = 0;
+    for (int i = valence_[b]; i < valence_[b + 1]; ++i)
+      if (to(nb_a_[i]) == a) found = nb_a_[i], ++back;
+    for (int i = valence_[a]; i < valence_[a + 1]; ++i) forth += to(nb_a_[i]) == b;
+    // One triangle each way at most: a -> b twice is an edge with two
+    // triangles of the same orientation (or more than two triangles).
+    if (forth != 1 || back > 1) return false;
+    if (found >= 0) {
+      twin_[h] = found;
     } else {
-      const int h = keys_[i].second;
-      border_[origin_[h]] = border_[to(h)] = 1;
+      border_[a] = border_[b] = 1;
     }
-    i = j;
   }
   // Every vertex must be one fan (split_nonmanifold_vertices did that): the
   // ring from its stored halfedge must hold all its outgoing halfedges.
@@ -411,10 +431,7 @@ void ArrayRemesher::flip_for_valence() {
     const Vec3 nf = cross(pb - pa, pc - pa), ng = cross(pa - pb, pd - pb);  // current pair
     const Vec3 n1 = cross(pa - pc, pd - pc), n2 = cross(pb - pd, pc - pd);  // (c, a, d), (d, b, c)
     if (dot(nf, ng) > dot(n1, n2)) continue;
-    // c and d must not already be joined.
-    ring(c, ring_c_);
-    neighbours(ring_c_, nb_a_);
-    if (std::find(nb_a_.begin(), nb_a_.end(), d) != nb_a_.end()) continue;
+    if (joined(c, d)) continue;  // the new edge exists already
     // Both new triangles face the way both old ones and their outer
     // neighbours do, and have some area.
     const double s2 = norm2(pd - pc);
