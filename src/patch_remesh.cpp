@@ -32,13 +32,13 @@ bool badly_shaped(const Vec3& a, const Vec3& b, const Vec3& c) {
   const double l0 = norm2(b - a), l1 = norm2(c - b), l2 = norm2(a - c);
   const double lo = std::min({l0, l1, l2}), hi = std::max({l0, l1, l2});
   if (hi > 16 * lo) return true;
-  const Vec3 p[3] = {a, b, c};
+  // A cap's wide angle faces the longest edge and is obtuse (most triangles
+  // stop here, with no square root).
+  const double rest = l0 + l1 + l2 - hi;
+  if (hi <= rest) return false;
   const double cos160 = std::cos(160.0 / 180 * M_PI);
-  for (int k = 0; k < 3; ++k) {
-    const Vec3 u = p[(k + 1) % 3] - p[k], v = p[(k + 2) % 3] - p[k];
-    if (dot(u, v) < cos160 * std::sqrt(norm2(u) * norm2(v))) return true;
-  }
-  return false;
+  const double prod = (l0 + l1 + l2 - hi - lo) * lo;  // squared lengths of the two shorter edges, multiplied
+  return rest - hi < 2 * cos160 * std::sqrt(prod);
 }
 
 class ArrayRemesher {
