@@ -60,13 +60,17 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
   // only accepts points on that triangle up to rounding.
   const VertexVelocity* prev_vertex = v_prev.target<VertexVelocity>();
   const double on_surface = 1e-9 * r;
+  const double cos_max_turn = std::cos(options.max_turn);
   auto advect = [&](const Vec3& x0, int32_t prev_triangle) {
     Vec3 k1;
     if (!(prev_vertex && prev_vertex->on_triangle(x0, prev_triangle, on_surface, k1))) k1 = v_prev(x0);
     const Vec3 k2 = v_next(x0 + k1 * dt);
     const double s1 = norm(k1), s2 = norm(k2);
     const double reach = std::max(s1, s2) * dt / (options.max_step_fraction * r);
-    const double turn = s1 > 0 && s2 > 0 ? std::acos(std::clamp(dot(k1, k2) / (s1 * s2), -1.0, 1.0)) : 0.0;
+    const double cos_turn = s1 > 0 && s2 > 0 ? std::clamp(dot(k1, k2) / (s1 * s2), -1.0, 1.0) : 1.0;
+    // acos only when the turn may exceed max_turn (the margin keeps the
+    // decision the same as comparing acos itself); a smooth flow skips it.
+    const double turn = cos_turn > cos_max_turn + 1e-12 ? 0.0 : std::acos(cos_turn);
     const double need = std::max(reach, turn / options.max_turn);
     if (!(need > 1)) return x0 + (k1 + k2) * (0.5 * dt);  // also NaN: the vertex is dropped later
     const int n = std::min(int(std::ceil(need)), kMaxSubsteps);
