@@ -54,8 +54,15 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     const double a = s / dt;
     return v_prev(x) * (1 - a) + v_next(x) * a;
   };
-  auto advect = [&](const Vec3& x0) {
-    const Vec3 k1 = v_prev(x0);
+  // Per-vertex velocities: a patch vertex lies on the triangle of frame f-1
+  // it was projected onto (surface_triangle), so its velocity there needs
+  // no closest-point search (one search of three per vertex). The tolerance
+  // only accepts points on that triangle up to rounding.
+  const VertexVelocity* prev_vertex = v_prev.target<VertexVelocity>();
+  const double on_surface = 1e-9 * r;
+  auto advect = [&](const Vec3& x0, int32_t prev_triangle) {
+    Vec3 k1;
+    if (!(prev_vertex && prev_vertex->on_triangle(x0, prev_triangle, on_surface, k1))) k1 = v_prev(x0);
     const Vec3 k2 = v_next(x0 + k1 * dt);
     const double s1 = norm(k1), s2 = norm(k2);
     const double reach = std::max(s1, s2) * dt / (options.max_step_fraction * r);
@@ -76,13 +83,16 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     std::size_t p = std::upper_bound(offset.begin(), offset.end(), std::min(b, nverts)) - offset.begin() - 1;
     for (std::size_t i = b; i < e; ++i) {
       Vec3 x;
+      int32_t prev_triangle = -1;
       if (i < nverts) {
         while (offset[p + 1] <= i) ++p;
-        x = patches.patches[p].positions[i - offset[p]];
+        const Patch& patch = patches.patches[p];
+        x = patch.positions[i - offset[p]];
+        if (patch.surface_triangle.size() == patch.positions.size()) prev_triangle = patch.surface_triangle[i - offset[p]];
       } else {
         x = patches.patches[i - nverts].center;
       }
-      x = advect(x);
+      x = advect(x, prev_triangle);
       Moved& m = moved[i];
       m.position = x;
       if (!is_finite(x)) continue;

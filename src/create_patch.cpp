@@ -255,7 +255,9 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
       area += 0.5 * norm(cross(mesh.positions[f[1]] - mesh.positions[f[0]], mesh.positions[f[2]] - mesh.positions[f[0]]));
     constexpr double kMaxRemeshTriangles = 4000;
     const double edge = std::max(options.remesh_edge * r, std::sqrt(area / (0.433 * kMaxRemeshTriangles)));
-    if (detail::cgal_remesh(remeshed, edge)) {
+    const bool remeshed_ok = options.remesher == Remesher::Cgal ? detail::cgal_remesh(remeshed, edge)
+                                                                : detail::fast_remesh(remeshed, edge);
+    if (remeshed_ok) {
       trim_to_ball(remeshed, at.position, r);
       snap(remeshed);
       if (detail::lscm_flatten(remeshed, uv)) {

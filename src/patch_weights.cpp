@@ -79,22 +79,24 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
       ++count[patch.triangles[t][k]];
     }
 
-  // Boundary vertices: ends of edges used by one triangle.
-  std::vector<uint64_t> edges;
-  edges.reserve(nt * 3);
+  // Boundary vertices: ends of edges used by one triangle. Edges are grouped
+  // by their lower vertex (a counting sort: a patch vertex has a handful of
+  // edges) and counted within each group; sorting all 3 * nt edge keys cost
+  // about as much as the rest of the weights.
+  std::vector<int32_t> first(nv + 1, 0);
   for (const Tri& f : patch.triangles)
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t a = f[k], b = f[(k + 1) % 3];
-      edges.push_back((uint64_t(std::min(a, b)) << 32) | std::max(a, b));
-    }
-  std::sort(edges.begin(), edges.end());
+    for (int k = 0; k < 3; ++k) ++first[std::min(f[k], f[(k + 1) % 3]) + 1];
+  for (std::size_t v = 0; v < nv; ++v) first[v + 1] += first[v];
+  std::vector<int32_t> upper(3 * nt), fill(first.begin(), first.end() - 1);
+  for (const Tri& f : patch.triangles)
+    for (int k = 0; k < 3; ++k) upper[fill[std::min(f[k], f[(k + 1) % 3])]++] = std::max(f[k], f[(k + 1) % 3]);
   std::vector<uint8_t> on_boundary(nv, 0);
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i + 1;
-    while (j < edges.size() && edges[j] == edges[i]) ++j;
-    if (j - i == 1) on_boundary[edges[i] >> 32] = on_boundary[edges[i] & 0xffffffffu] = 1;
-    i = j;
-  }
+  for (std::size_t a = 0; a < nv; ++a)
+    for (int32_t i = first[a]; i < first[a + 1]; ++i) {
+      int uses = 0;
+      for (int32_t j = first[a]; j < first[a + 1]; ++j) uses += upper[j] == upper[i];
+      if (uses == 1) on_boundary[a] = on_boundary[upper[i]] = 1;
+    }
 
   patch.quality.assign(nv, 0.f);
   patch.border.assign(nv, 0);

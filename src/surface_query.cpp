@@ -75,8 +75,15 @@ RTCDevice shared_device() {
   return device;
 }
 
+// What the callback reads of one triangle, in one place: its bounding box
+// (float, rounded outward from the double positions) and its corners.
+struct TriangleRecord {
+  float lo[3], hi[3];
+  Vec3 a, b, c;
+};
+
 struct QueryState {
-  const TriMesh* mesh;
+  const TriangleRecord* records;
   Vec3 p;
   ClosestHit best;
   double best_d2;
@@ -85,9 +92,21 @@ struct QueryState {
 bool point_query_callback(RTCPointQueryFunctionArguments* args) {
   auto* s = static_cast<QueryState*>(args->userPtr);
   const int t = int(args->primID);
-  const Tri& f = s->mesh->triangles[t];
-  const auto& P = s->mesh->positions;
-  const TrianglePoint h = closest_point_on_triangle(s->p, P[f[0]], P[f[1]], P[f[2]]);
+  // Embree calls back for every triangle of a leaf whose node meets the
+  // query sphere; most of them are farther than the sphere's radius, which
+  // their bounding box shows for a fraction of the exact closest point's
+  // cost. The box holds the triangle, so a box beyond the radius means a
+  // triangle beyond it: no closer point (nor tie) is skipped.
+  const TriangleRecord& rec = s->records[t];
+  {
+    const TriangleRecord& b = rec;
+    const double dx = std::max({double(b.lo[0]) - s->p.x, s->p.x - double(b.hi[0]), 0.0});
+    const double dy = std::max({double(b.lo[1]) - s->p.y, s->p.y - double(b.hi[1]), 0.0});
+    const double dz = std::max({double(b.lo[2]) - s->p.z, s->p.z - double(b.hi[2]), 0.0});
+    const double radius = args->query->radius;
+    if (dx * dx + dy * dy + dz * dz > radius * radius) return false;
+  }
+  const TrianglePoint h = closest_point_on_triangle(s->p, rec.a, rec.b, rec.c);
   const double d2 = norm2(h.point - s->p);
   // Exact ties (shared edges and vertices) go to the lowest index so the
   // answer does not depend on BVH traversal order.
@@ -110,6 +129,7 @@ struct SurfaceQuery::Impl {
   RTCScene scene = nullptr;
   std::vector<float> vertices;      // xyz per vertex + padding for 16-byte loads
   std::vector<uint32_t> indices;
+  std::vector<TriangleRecord> records;  // per triangle
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
@@ -124,6 +144,22 @@ SurfaceQuery::SurfaceQuery(const TriMesh& mesh) : mesh_(mesh), impl_(std::make_u
   impl_->indices.resize(3 * mesh.triangles.size());
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
     for (int k = 0; k < 3; ++k) impl_->indices[3 * t + k] = uint32_t(mesh.triangles[t][k]);
+
+  impl_->records.resize(mesh.triangles.size());
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Tri& f = mesh.triangles[t];
+    TriangleRecord& rec = impl_->records[t];
+    rec.a = mesh.positions[f[0]], rec.b = mesh.positions[f[1]], rec.c = mesh.positions[f[2]];
+    for (int k = 0; k < 3; ++k) {
+      const double lo = std::min({mesh.positions[f[0]][k], mesh.positions[f[1]][k], mesh.positions[f[2]][k]});
+      const double hi = std::max({mesh.positions[f[0]][k], mesh.positions[f[1]][k], mesh.positions[f[2]][k]});
+      float flo = float(lo), fhi = float(hi);
+      if (double(flo) > lo) flo = std::nextafter(flo, -std::numeric_limits<float>::infinity());
+      if (double(fhi) < hi) fhi = std::nextafter(fhi, std::numeric_limits<float>::infinity());
+      rec.lo[k] = flo;
+      rec.hi[k] = fhi;
+    }
+  }
 
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, impl_->vertices.data(), 0,
@@ -142,7 +178,7 @@ SurfaceQuery::SurfaceQuery(const TriMesh& mesh) : mesh_(mesh), impl_(std::make_u
 SurfaceQuery::~SurfaceQuery() = default;
 
 ClosestHit SurfaceQuery::closest(const Vec3& p, double max_distance) const {
-  QueryState state{&mesh_, p, {}, std::numeric_limits<double>::infinity()};
+  QueryState state{impl_->records.data(), p, {}, std::numeric_limits<double>::infinity()};
   if (!impl_->scene || !is_finite(p)) return state.best;
   RTCPointQuery query;
   query.x = float(p.x);

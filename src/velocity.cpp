@@ -3,25 +3,46 @@
 
 namespace lapflow {
 
+VertexVelocity::VertexVelocity(const SurfaceQuery& query) : query_(&query) {
+  // Embree's point query only culls by its radius: an unbounded query visits
+  // many far triangles before the radius shrinks. Points sampled here are
+  // near the surface (a patch vertex moved by a fraction of a frame, most
+  // often one lying on this very surface), so try a radius of a fraction of
+  // an edge first and widen only when nothing is that close. The closest
+  // point within a small radius, when there is one, is the closest point.
+  const TriMesh& mesh = query.mesh();
+  near_ = 2 * mean_edge_length(mesh) + 1e-9 * norm(bounding_box(mesh).size());
+}
+
+Vec3 VertexVelocity::operator()(const Vec3& p) const {
+  const TriMesh& mesh = query_->mesh();
+  ClosestHit hit = query_->closest(p, near_ / 16);
+  if (!hit.found) hit = query_->closest(p, near_);
+  if (!hit.found) hit = query_->closest(p, 8 * near_);
+  if (!hit.found) hit = query_->closest(p, INFINITY);
+  if (!hit.found) return Vec3{};
+  const Tri& f = mesh.triangles[hit.triangle];
+  const double b0 = 1.0 - hit.b1 - hit.b2;
+  return mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
+}
+
+bool VertexVelocity::on_triangle(const Vec3& p, int t, double tolerance, Vec3& velocity) const {
+  const TriMesh& mesh = query_->mesh();
+  if (t < 0 || std::size_t(t) >= mesh.triangles.size() || !mesh.has_velocities()) return false;
+  const Tri& f = mesh.triangles[t];
+  const TrianglePoint q = closest_point_on_triangle(p, mesh.positions[f[0]], mesh.positions[f[1]], mesh.positions[f[2]]);
+  if (!(norm2(q.point - p) <= tolerance * tolerance)) return false;
+  const double b0 = 1.0 - q.b1 - q.b2;
+  velocity = mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * q.b1 + mesh.velocities[f[2]] * q.b2;
+  return true;
+}
+
 VelocityField vertex_velocity_field(const SurfaceQuery& query) {
   const TriMesh& mesh = query.mesh();
   // A mesh without velocities (or without triangles) moves nothing; the
   // caller decides whether that is acceptable (--allow-zero-velocity).
   if (!mesh.has_velocities() || mesh.empty()) return [](const Vec3&) { return Vec3{}; };
-  // Embree's point query only culls by its radius: an unbounded query visits
-  // many far triangles before the radius shrinks. Points sampled here are
-  // near the surface (a patch vertex moved by a fraction of a frame), so try
-  // a radius of a few edges first and widen only when nothing is that close.
-  const double near = 2 * mean_edge_length(mesh) + 1e-9 * norm(bounding_box(mesh).size());
-  return [&query, &mesh, near](const Vec3& p) {
-    ClosestHit hit = query.closest(p, near);
-    if (!hit.found) hit = query.closest(p, 8 * near);
-    if (!hit.found) hit = query.closest(p, INFINITY);
-    if (!hit.found) return Vec3{};
-    const Tri& f = mesh.triangles[hit.triangle];
-    const double b0 = 1.0 - hit.b1 - hit.b2;
-    return mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
-  };
+  return VertexVelocity(query);
 }
 
 VelocityField with_min_speed(VelocityField field, double min_speed) {

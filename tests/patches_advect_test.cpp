@@ -287,3 +287,89 @@ TEST(PatchesAdvect, StillnessIsBitForBit) {
     EXPECT_EQ(moved.patches[i].triangles, set.patches[i].triangles);
   }
 }
+
+namespace {
+
+// The rigid sphere with per-vertex velocities (the exact rigid field at the
+// vertices), advected with vertex_velocity_field; `wrap` hides the field's
+// VertexVelocity behind a lambda so advection must search every sample.
+RigidRun run_rigid_vertex_velocity(int frames, const PatchOptions& po, bool wrap) {
+  RigidSphere s;
+  RigidRun run;
+  auto with_velocity = [&](int f) {
+    auto m = std::make_unique<TriMesh>(s.mesh(f));
+    const VelocityField v = s.velocity(f / 24.0);
+    for (const Vec3& p : m->positions) m->velocities.push_back(v(p));
+    return m;
+  };
+  auto mesh = with_velocity(0);
+  auto query = std::make_unique<SurfaceQuery>(*mesh);
+  seed_patches(*query, 0, po, {}, {}, run.patches);
+  AdvectOptions ao;
+  ao.dt = 1.0 / 24;
+  for (int f = 1; f <= frames; ++f) {
+    auto next_mesh = with_velocity(f);
+    auto next_query = std::make_unique<SurfaceQuery>(*next_mesh);
+    VelocityField prev = vertex_velocity_field(*query), next = vertex_velocity_field(*next_query);
+    EXPECT_NE(prev.target<VertexVelocity>(), nullptr);
+    if (wrap) {
+      prev = [p = prev](const Vec3& x) { return p(x); };
+      next = [n = next](const Vec3& x) { return n(x); };
+    }
+    const AdvectStats st = advect_patches(*next_query, prev, next, po, ao, {}, run.patches);
+    run.removed += st.vertices_removed;
+    run.max_residual = std::max(run.max_residual, st.max_residual);
+    query = std::move(next_query);
+    mesh = std::move(next_mesh);
+  }
+  return run;
+}
+
+}  // namespace
+
+TEST(PatchesAdvect, VertexVelocityOnTheKnownTriangleMatchesTheSearch) {
+  // Advection reads a patch vertex's frame f-1 velocity on the triangle it
+  // was projected onto instead of searching for the closest point: the
+  // vertex lies on that triangle (up to rounding), so both are the velocity
+  // at the same surface point and the patches must agree to rounding.
+  PatchOptions po;
+  po.radius = 0.4;
+  const RigidRun searched = run_rigid_vertex_velocity(3, po, true);
+  set_thread_count(1);
+  const RigidRun one = run_rigid_vertex_velocity(3, po, false);
+  set_thread_count(2);
+  const RigidRun two = run_rigid_vertex_velocity(3, po, false);
+  set_thread_count(0);
+  ASSERT_EQ(searched.patches.patches.size(), one.patches.patches.size());
+  ASSERT_EQ(one.patches.patches.size(), two.patches.patches.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < one.patches.patches.size(); ++i) {
+    const Patch &a = searched.patches.patches[i], &b = one.patches.patches[i], &c = two.patches.patches[i];
+    ASSERT_EQ(a.positions.size(), b.positions.size());
+    EXPECT_EQ(a.triangles, b.triangles);
+    for (std::size_t v = 0; v < a.positions.size(); ++v) worst = std::max(worst, norm(a.positions[v] - b.positions[v]));
+    EXPECT_EQ(b.positions, c.positions) << "same result for 1 and 2 threads";
+    EXPECT_EQ(b.weight, c.weight);
+  }
+  EXPECT_LT(worst, 1e-9 * po.radius);
+  EXPECT_LT(one.max_residual, 1e-5 * po.radius);
+}
+
+TEST(VertexVelocity, OnTriangleAnswersOnlyForPointsOfThatTriangle) {
+  TriMesh m = test::plane_grid(4, 4, 1.0, 1.0);
+  for (const Vec3& p : m.positions) m.velocities.push_back({2 * p.x - p.y, 0.5 + p.y, 3 * p.x});
+  const SurfaceQuery q(m);
+  const VertexVelocity field(q);
+  const Vec3 p{0.3, 0.55, 0.0};
+  const ClosestHit hit = q.closest(p, INFINITY);
+  ASSERT_TRUE(hit.found);
+  Vec3 v;
+  ASSERT_TRUE(field.on_triangle(p, hit.triangle, 1e-12, v));
+  EXPECT_LT(norm(v - field(p)), 1e-12);
+  EXPECT_LT(norm(v - Vec3{2 * 0.3 - 0.55, 0.5 + 0.55, 0.9}), 1e-12);  // affine: exact
+  EXPECT_FALSE(field.on_triangle(p + Vec3{0, 0, 1e-6}, hit.triangle, 1e-9, v)) << "off the surface";
+  const int other = hit.triangle == 0 ? int(m.triangles.size()) - 1 : 0;
+  EXPECT_FALSE(field.on_triangle(p, other, 1e-9, v)) << "a far triangle";
+  EXPECT_FALSE(field.on_triangle(p, -1, 1e-9, v));
+  EXPECT_FALSE(field.on_triangle(p, int(m.triangles.size()), 1e-9, v));
+}

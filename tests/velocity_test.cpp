@@ -163,3 +163,48 @@ TEST(BandedVelocityField, AgreesWithExactVertexVelocitiesOnDamBreak) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+TEST(BandedVelocityField, EveryPointInsideTheBandIsTrilinearAcrossBricksAndNegativeCoordinates) {
+  // A sphere around the origin: the band spans negative and positive voxel
+  // coordinates and many 8^3-voxel bricks, so samples fall on every side of
+  // brick boundaries (where the 8 corners of a cell come from a brick's apron).
+  // Trilinear interpolation reproduces an affine field, so inside the band the
+  // banded field must equal the exact one up to float storage, without asking
+  // the exact field; outside it the exact field answers, bit for bit.
+  const TriMesh sphere = test::icosphere(3, 0.6, {-0.05, 0.02, 0.01});
+  std::atomic<int> calls{0};
+  const VelocityField exact = [&calls](const Vec3& p) {
+    ++calls;
+    return affine(p);
+  };
+  const double h = 0.02;  // 30 voxels per radius: several bricks across the sphere
+  const VelocityField band = banded_velocity_field(exact, sphere, h, 3);
+  const int built = calls;
+  int inside = 0;
+  for (int k = 0; k < 4000; ++k) {
+    // Points on a sphere of radius 0.6 +- 1.5 voxels (inside the band, whose
+    // half-width is 3 voxels around the vertices).
+    const double u = std::fmod(k * 0.618034, 1.0), w = std::fmod(k * 0.754878, 1.0);
+    const double z = 2 * u - 1, phi = 2 * M_PI * w, s = std::sqrt(1 - z * z);
+    const double rad = 0.6 + h * (1.5 * std::fmod(k * 0.414214, 2.0) - 1.5);
+    const Vec3 p = Vec3{s * std::cos(phi), s * std::sin(phi), z} * rad + Vec3{-0.05, 0.02, 0.01};
+    const int before = calls;
+    const Vec3 a = band(p);
+    inside += calls == before;
+    EXPECT_LT(norm(a - affine(p)), 2e-6) << k;
+  }
+  // The icosphere's chords sit up to ~0.012 m inside the sphere, so nearly
+  // every point has all 8 corners in the band.
+  EXPECT_GT(inside, 3900);
+  EXPECT_EQ(calls - built, 4000 - inside);
+  const Vec3 centre{-0.05, 0.02, 0.01};
+  const int before = calls;
+  EXPECT_EQ(band(centre).x, affine(centre).x);  // far from the surface: the exact field
+  EXPECT_EQ(calls - before, 1);
+}
+
+}  // namespace
+}  // namespace lapflow

@@ -14,6 +14,7 @@
 #include "lapflow/mesh_io.hpp"
 #include "lapflow/parallel.hpp"
 #include "lapflow/patches.hpp"
+#include "lapflow/pipeline.hpp"
 #include "lapflow/surface_query.hpp"
 #include "lapflow/velocity.hpp"
 
@@ -64,10 +65,20 @@ std::size_t vertex_total(const PatchSet& s) {
   return n;
 }
 
-void bench_create(const SurfaceQuery& q, double r, bool remesh) {
+// Seeding/creation variants: no remeshing, then each remesher.
+struct CreateVariant {
+  bool remesh;
+  Remesher remesher;
+  const char* label;
+};
+constexpr CreateVariant kCreateVariants[] = {
+    {false, Remesher::Fast, " (no remesh)"}, {true, Remesher::Cgal, " + cgal remesh"}, {true, Remesher::Fast, " + fast remesh"}};
+
+void bench_create(const SurfaceQuery& q, double r, const CreateVariant& variant) {
   PatchOptions po;
   po.radius = r;
-  po.remesh = remesh;
+  po.remesh = variant.remesh;
+  po.remesher = variant.remesher;
   const SurfaceAdjacency adj = build_surface_adjacency(q.mesh());
   const auto points = seed_points(q.mesh(), 4 * r, 3);
   const std::size_t n = std::min<std::size_t>(points.size(), 300);
@@ -77,7 +88,7 @@ void bench_create(const SurfaceQuery& q, double r, bool remesh) {
     if (auto p = create_patch(q, adj, points[i], uint32_t(i), 0, po, {})) tris += p->triangles.size();
   const double t = double(std::clock() - c0) / CLOCKS_PER_SEC;
   fmt::print("  create_patch{:<15} {:.3f} ms cpu per patch, {:.0f} triangles per patch ({} patches)\n",
-             remesh ? " + remesh" : " (no remesh)", 1e3 * t / double(n), double(tris) / double(n), n);
+             variant.label, 1e3 * t / double(n), double(tris) / double(n), n);
 }
 
 void bench_sphere() {
@@ -91,20 +102,20 @@ void bench_sphere() {
     fmt::print("  seed_points                 {}, {} samples\n", t.text(), pts.size());
   }
   PatchSet set;
-  for (bool remesh : {false, true}) {
+  for (const CreateVariant& variant : kCreateVariants) {
     PatchOptions po;
     po.radius = r;
-    po.remesh = remesh;
+    po.remesh = variant.remesh;
+    po.remesher = variant.remesher;
     PatchSet s;
     const Timer t;
     seed_patches(qa, 0, po, {}, {}, s);
-    fmt::print("  seed_patches{:<15} {}, {} patches, {} vertices\n", remesh ? " + remesh" : " (no remesh)", t.text(),
-               s.patches.size(), vertex_total(s));
-    if (remesh) set = std::move(s);
+    fmt::print("  seed_patches{:<15} {}, {} patches, {} vertices\n", variant.label, t.text(), s.patches.size(),
+               vertex_total(s));
+    if (variant.remesh && variant.remesher == PatchOptions{}.remesher) set = std::move(s);  // the default
   }
   set_thread_count(1);
-  bench_create(qa, 0.1, true);
-  bench_create(qa, 0.1, false);
+  for (const CreateVariant& variant : kCreateVariants) bench_create(qa, 0.1, variant);
   set_thread_count(0);
   // Advect: rigid spin, frame b is the same sphere meshed differently.
   // Duplicate the patch set until it holds about 1M vertices.
@@ -138,6 +149,22 @@ void bench_sphere() {
     const Timer t;
     const AdvectStats st = advect_patches(qb2, vertex_velocity_field(qa2), vertex_velocity_field(qb2), po, ao, {}, s);
     fmt::print("  advect+project (vertex v)   {} for {} vertices, {} removed\n", t.text(), nv, st.vertices_removed);
+    // The bake's default: per-vertex velocities sampled on a band of voxels
+    // (BakeOptions::velocity_voxel = 2 mean edges, velocity_band = 6), built
+    // as pipeline.cpp's load_frame builds it (on the read-ahead thread there,
+    // so the band's construction is timed apart from the advection).
+    const BakeOptions bake;
+    const Timer tb;
+    const VelocityField va = banded_velocity_field(vertex_velocity_field(qa2), a2,
+                                                   bake.velocity_voxel * mean_edge_length(a2), bake.velocity_band);
+    const VelocityField vb = banded_velocity_field(vertex_velocity_field(qb2), b2,
+                                                   bake.velocity_voxel * mean_edge_length(b2), bake.velocity_band);
+    const std::string built = tb.text();
+    PatchSet s2 = big;
+    const Timer t2;
+    const AdvectStats st2 = advect_patches(qb2, va, vb, po, ao, {}, s2);
+    fmt::print("  advect+project (banded v)   {} for {} vertices, {} removed (2 bands built in {})\n", t2.text(), nv,
+               st2.vertices_removed, built);
   }
 }
 

@@ -146,6 +146,9 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->group("Patches");
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
+  cmd.add_option("--remesher", o.patch.remesher, "Remesher of new patches: fast (plain arrays) or cgal (same algorithm)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}))
+      ->group("Patches");
   cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
       ->capture_default_str()
       ->group("Patches");

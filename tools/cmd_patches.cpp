@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -22,6 +23,7 @@ struct PatchesCommand {
   std::string mesh_pattern, frames, out_dir, name, vdb_pattern, grid_name, orientation = "random";
   double radius = 0, fps = 24, min_speed = 0, spacing = 1, delta_max = 3;
   bool remesh = true;
+  Remesher remesher = Remesher::Fast;
 };
 
 // One frame's surface with what samples velocity on it (all owned here so the
@@ -115,6 +117,7 @@ void run_patches(const PatchesCommand& c) {
   PatchOptions po;
   po.radius = c.radius;
   po.remesh = c.remesh;
+  po.remesher = c.remesher;
   po.seed = globals().seed;
   po.align = align;
   po.align_direction = align_direction;
@@ -178,6 +181,8 @@ void add_patches_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--remesh,!--no-remesh", c->remesh, "Isotropic remeshing of each new patch (target edge r/6)")
       ->capture_default_str();
+  cmd->add_option("--remesher", c->remesher, "Remesher of new patches: fast (plain arrays) or cgal (same algorithm)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}));
   cmd->add_option("--orientation", c->orientation, "Patch rotation: random, or world:x,y,z to align u with a direction")
       ->capture_default_str();
   add_global_options(*cmd);

@@ -49,13 +49,20 @@ struct SurfacePoint {
   int triangle = -1;
 };
 
+/// Which isotropic remesher new patches go through (same algorithm).
+enum class Remesher {
+  Fast,  ///< plain arrays specialised for small disks (patch_remesh.cpp)
+  Cgal,  ///< CGAL::Polygon_mesh_processing::isotropic_remeshing
+};
+
 struct PatchOptions {
   double radius = 0.1;            ///< r in metres: the exemplar spans 2r on the surface
-  /// Isotropic remeshing of each new patch before flattening (CGAL), then
+  /// Isotropic remeshing of each new patch before flattening (`remesher`), then
   /// trimmed to distance r of p. On by default: on dam_break it doubles the
   /// mean weight at equal distortion (docs/patches.md).
   bool remesh = true;
   double remesh_edge = 1.0 / 6;   ///< target edge length as a fraction of r
+  Remesher remesher = Remesher::Fast;
   /// Orientation: random angle from hash(seed, patch id) unless `align` is
   /// set, in which case u follows `align_direction` projected on the tangent plane.
   bool align = false;

@@ -14,7 +14,29 @@ using VelocityField = std::function<Vec3(const Vec3&)>;
 
 /// Per-vertex velocities of `query.mesh()` interpolated barycentrically at
 /// the closest surface point. The query (and its mesh) must outlive the field.
+/// A mesh with velocities gives a field holding a VertexVelocity
+/// (`field.target<VertexVelocity>()`).
 VelocityField vertex_velocity_field(const SurfaceQuery& query);
+
+/// The sampler behind vertex_velocity_field. Advection asks it directly for
+/// points it knows lie on a given triangle of the mesh (a patch vertex on the
+/// triangle it was projected onto last frame), which needs no search.
+class VertexVelocity {
+ public:
+  explicit VertexVelocity(const SurfaceQuery& query);
+  Vec3 operator()(const Vec3& p) const;
+  const SurfaceQuery& query() const { return *query_; }
+  /// The velocity at p when p is within `tolerance` metres of triangle t
+  /// (interpolated at p's closest point on t), otherwise false. Any point of
+  /// the surface at distance <= tolerance is as good a closest point as the
+  /// search's: the two answers differ by at most tolerance times the
+  /// velocity's gradient.
+  bool on_triangle(const Vec3& p, int t, double tolerance, Vec3& velocity) const;
+
+ private:
+  const SurfaceQuery* query_;
+  double near_;
+};
 
 /// Zero below `min_speed` (m/s): real solvers leave a few cm/s of noise on
 /// liquid at rest, which would make a texture creep.
