@@ -679,17 +679,26 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   for (auto& a : won) a.store(0, std::memory_order_relaxed);
   // A winner's pixel-space triangle, for texels of one chart (same_chart)
   // or of one fluid triangle. Texels come in row order, so a patch triangle
-  // returns on the next rows: a small direct-mapped cache of them saves
-  // most of the recomputation (winner_pixels is a pure function of these).
+  // returns on the next rows: a direct-mapped cache per thread, large enough
+  // for a row's worth of triangles, saves most of the recomputation
+  // (winner_pixels is a pure function of these, so hits cannot change a
+  // result). The generation number empties it for each call.
   struct Winner {
     uint64_t key = kNoKey;
     int tri = -1, chart = -1;
     bool ok = false, same_chart = false;
     Bary bary;
   };
-  constexpr int kWinnerCacheBits = 8;
+  constexpr int kWinnerCacheBits = 11;
+  static std::atomic<uint64_t> generations{0};
+  const uint64_t generation = ++generations;
   parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
-    std::vector<Winner> cache(std::size_t(1) << kWinnerCacheBits);
+    thread_local std::vector<Winner> cache;
+    thread_local uint64_t cache_generation = 0;
+    if (cache_generation != generation) {
+      cache.assign(std::size_t(1) << kWinnerCacheBits, Winner{});
+      cache_generation = generation;
+    }
     const Winner* cur = nullptr;
     Vec2 P[3];
     std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run

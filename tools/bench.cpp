@@ -110,7 +110,7 @@ void bake_data(const std::string& pattern, int resolution, int first, int last) 
 }
 
 void header() {
-  fmt::print("| scene | atlas | triangles | patches | read s | advect s | atlas s | raster s | write s | total s/frame | peak RSS MiB | first frame s |\n");
+  fmt::print("| scene | atlas | triangles | patches | read s | advect s | atlas s (ahead) | raster s | write s | total s/frame | peak RSS MiB | first frame s |\n");
   fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 

@@ -37,8 +37,8 @@ struct BakeOptions {
   bool aov = false;
   bool dump_patches = false;
   ExrOptions exr;
-  /// Read the next frame (mesh, Embree scene, velocity band) on another
-  /// thread while the current one computes.
+  /// Read the next frame (mesh, Embree scene, velocity band) and build its
+  /// surface atlas on another thread while the current one computes.
   bool prefetch_read = true;
   /// Write each frame's files on another thread while the next frame
   /// computes: one more frame of images in memory.
@@ -64,6 +64,10 @@ struct FrameStats {
   std::size_t chart_texels = 0;
   double coverage = 0;                    ///< chart texels a patch kept / chart texels
   std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
+  /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
+  /// the atlas's own build time, on the read-ahead thread (so it overlaps
+  /// the previous frame, except on the first); total: this frame's share of
+  /// the bake's wall time (frames sum to the bake).
   double seconds_read = 0, seconds_advect = 0, seconds_seed = 0, seconds_atlas = 0, seconds_raster = 0,
          seconds_write = 0, seconds_total = 0;
   double peak_rss_mb = 0;
