@@ -147,7 +147,8 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
   cmd.add_option("--remesher", o.patch.remesher, "Remesher of new patches: fast (plain arrays) or cgal (same algorithm)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}))
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}).description(""))
+      ->type_name("fast|cgal")
       ->group("Patches");
   cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
       ->capture_default_str()
