@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "lapflow/parallel.hpp"
+#include "lapflow/surface_query.hpp"
 #include "lapflow/velocity.hpp"
 
 namespace lapflow {
@@ -85,6 +86,76 @@ Vec3 sample_band(const Band& band, const Vec3& p) {
   return {sx, sy, sz};
 }
 
+// The band of per-vertex velocities, ring by ring: ring 0 is the voxels
+// holding a vertex, ring k the voxels the k-th one-voxel dilation adds (the
+// same voxels as one dilation by the band width). Each voxel's closest point
+// is searched within a radius known to hold it: half a voxel diagonal in
+// ring 0 (a vertex is that close), else the distance of a neighbour in an
+// earlier ring plus the distance to it (triangle inequality). The closest
+// point within any radius that holds one is the closest point (ties go to the
+// lowest triangle), so the values are those of `vertex(p)` bit for bit; the
+// plain search tries radii from an eighth of an edge to 16 edges first,
+// which wastes queries on voxels several edges off the surface.
+void sample_vertex_velocity_by_rings(const VertexVelocity& vertex, const openvdb::MaskGrid& seeds, int band_voxels,
+                                     double h, std::vector<openvdb::Coord>& coords, std::vector<Vec3s>& values) {
+  const TriMesh& mesh = vertex.query().mesh();
+  openvdb::FloatGrid distance(std::numeric_limits<float>::infinity());
+  openvdb::MaskGrid::Ptr reached = seeds.deepCopy();
+  std::vector<openvdb::Coord> ring;
+  for (auto it = reached->cbeginValueOn(); it; ++it) ring.push_back(it.getCoord());
+  const double slack = 1 + 1e-6;
+  for (int k = 0; !ring.empty(); ++k) {
+    std::vector<Vec3s> v(ring.size());
+    std::vector<float> d(ring.size());
+    parallel_for(ring.size(), [&](std::size_t b, std::size_t e) {
+      auto known = distance.getConstAccessor();
+      for (std::size_t i = b; i < e; ++i) {
+        const openvdb::Coord& c = ring[i];
+        const Vec3 p = Vec3(c.x(), c.y(), c.z()) * h;
+        double bound = 0.5 * std::sqrt(3.0) * h;
+        if (k > 0) {
+          bound = INFINITY;
+          for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+              for (int dx = -1; dx <= 1; ++dx) {
+                const float dq = known.getValue(c.offsetBy(dx, dy, dz));
+                if (std::isfinite(dq)) bound = std::min(bound, double(dq) + h * std::sqrt(double(dx * dx + dy * dy + dz * dz)));
+              }
+        }
+        const ClosestHit hit = vertex.query().closest(p, bound * slack + 1e-12);
+        Vec3 vel;
+        double dist = bound;
+        if (hit.found) {
+          const Tri& f = mesh.triangles[hit.triangle];
+          const double b0 = 1.0 - hit.b1 - hit.b2;
+          vel = mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
+          dist = hit.distance;
+        } else {
+          vel = vertex(p);  // not expected: the bound holds a surface point
+        }
+        v[i] = Vec3s{float(vel.x), float(vel.y), float(vel.z)};
+        d[i] = float(dist * slack);  // rounded up: stays an upper bound
+      }
+    });
+    {
+      auto acc = distance.getAccessor();
+      for (std::size_t i = 0; i < ring.size(); ++i) acc.setValue(ring[i], d[i]);
+    }
+    coords.insert(coords.end(), ring.begin(), ring.end());
+    values.insert(values.end(), v.begin(), v.end());
+    if (k == band_voxels) break;
+    openvdb::MaskGrid::Ptr next = reached->deepCopy();
+    openvdb::tools::dilateActiveValues(next->tree(), 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    next->tree().voxelizeActiveTiles();
+    ring.clear();
+    auto was = reached->getConstAccessor();
+    for (auto it = next->cbeginValueOn(); it; ++it)
+      if (!was.isValueOn(it.getCoord())) ring.push_back(it.getCoord());
+    reached = next;
+  }
+}
+
 }  // namespace
 
 VelocityField banded_velocity_field(VelocityField exact, const TriMesh& mesh, double voxel_size, int band_voxels) {
@@ -105,20 +176,25 @@ VelocityField banded_velocity_field(VelocityField exact, const TriMesh& mesh, do
       acc.setValueOn(c);
     }
   }
-  openvdb::tools::dilateActiveValues(mask.tree(), band_voxels, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                     openvdb::tools::IGNORE_TILES);
-  mask.tree().voxelizeActiveTiles();
   std::vector<openvdb::Coord> coords;
-  coords.reserve(std::size_t(mask.activeVoxelCount()));
-  for (auto it = mask.cbeginValueOn(); it; ++it) coords.push_back(it.getCoord());
+  std::vector<Vec3s> values;
+  if (const VertexVelocity* vertex = exact.target<VertexVelocity>()) {
+    sample_vertex_velocity_by_rings(*vertex, mask, band_voxels, voxel_size, coords, values);
+  } else {
+    openvdb::tools::dilateActiveValues(mask.tree(), band_voxels, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    mask.tree().voxelizeActiveTiles();
+    coords.reserve(std::size_t(mask.activeVoxelCount()));
+    for (auto it = mask.cbeginValueOn(); it; ++it) coords.push_back(it.getCoord());
+    values.resize(coords.size());
+    parallel_for(coords.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        const Vec3 v = exact(Vec3(coords[i].x(), coords[i].y(), coords[i].z()) * voxel_size);
+        values[i] = Vec3s{float(v.x), float(v.y), float(v.z)};
+      }
+    });
+  }
   if (coords.empty()) return exact;
-  std::vector<Vec3s> values(coords.size());
-  parallel_for(coords.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      const Vec3 v = exact(Vec3(coords[i].x(), coords[i].y(), coords[i].z()) * voxel_size);
-      values[i] = Vec3s{float(v.x), float(v.y), float(v.z)};
-    }
-  });
 
   // Bricks: one per brick holding a band voxel (a cell whose corner voxel
   // is outside the band falls back to `exact` anyway).

@@ -9,6 +9,7 @@
 #include "io_test_helpers.hpp"
 #include "lapflow/mesh_io.hpp"
 #include "lapflow/parallel.hpp"
+#include "lapflow/surface_query.hpp"
 #include "lapflow/velocity.hpp"
 #include "test_helpers.hpp"
 
@@ -204,6 +205,47 @@ TEST(BandedVelocityField, EveryPointInsideTheBandIsTrilinearAcrossBricksAndNegat
   const int before = calls;
   EXPECT_EQ(band(centre).x, affine(centre).x);  // far from the surface: the exact field
   EXPECT_EQ(calls - before, 1);
+}
+
+}  // namespace
+}  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+TEST(BandedVelocityField, RingSearchGivesTheSameBandAsThePlainSearch) {
+  // With per-vertex velocities the band searches each voxel's closest point
+  // within a radius from its ring (a neighbour's distance plus the step);
+  // any other field is sampled by calling it. The two must give the same
+  // band bit for bit: the closest point within a radius that holds one is
+  // the closest point. Wrapping the field in a lambda forces the plain path.
+  TriMesh m = test::icosphere(3, 0.5, {0.1, -0.2, 0.05});
+  // A non-affine field, so that any change of closest triangle would show.
+  m.velocities.resize(m.positions.size());
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    const Vec3& p = m.positions[i];
+    m.velocities[i] = {std::sin(7 * p.y) + p.z * p.z, std::cos(5 * p.x) * p.z, p.x * p.y - 0.3};
+  }
+  const SurfaceQuery q(m);
+  const VelocityField vertex = vertex_velocity_field(q);
+  const VelocityField plain = [&vertex](const Vec3& p) { return vertex(p); };
+  const double h = 2 * mean_edge_length(m);
+  for (int width : {1, 4}) {
+    const VelocityField ringed = banded_velocity_field(vertex, m, h, width);
+    const VelocityField searched = banded_velocity_field(plain, m, h, width);
+    int compared = 0;
+    for (int k = 0; k < 3000; ++k) {
+      // Points from inside the sphere to (width + 1) voxels outside it.
+      const double u = std::fmod(k * 0.618034, 1.0), w = std::fmod(k * 0.754878, 1.0);
+      const double z = 2 * u - 1, phi = 2 * M_PI * w, s = std::sqrt(1 - z * z);
+      const double rad = 0.5 + h * ((width + 1) * std::fmod(k * 0.414214, 2.0) - (width + 1));
+      const Vec3 p = Vec3{s * std::cos(phi), s * std::sin(phi), z} * rad + Vec3{0.1, -0.2, 0.05};
+      const Vec3 a = ringed(p), b = searched(p);
+      ASSERT_TRUE(a.x == b.x && a.y == b.y && a.z == b.z) << "width " << width << " point " << k;
+      ++compared;
+    }
+    EXPECT_EQ(compared, 3000);
+  }
 }
 
 }  // namespace
