@@ -14,16 +14,27 @@ VertexVelocity::VertexVelocity(const SurfaceQuery& query) : query_(&query) {
   near_ = 2 * mean_edge_length(mesh) + 1e-9 * norm(bounding_box(mesh).size());
 }
 
-Vec3 VertexVelocity::operator()(const Vec3& p) const {
+Vec3 VertexVelocity::interpolate(int t, double b1, double b2) const {
   const TriMesh& mesh = query_->mesh();
-  ClosestHit hit = query_->closest(p, near_ / 16);
-  if (!hit.found) hit = query_->closest(p, near_);
-  if (!hit.found) hit = query_->closest(p, 8 * near_);
-  if (!hit.found) hit = query_->closest(p, INFINITY);
-  if (!hit.found) return Vec3{};
-  const Tri& f = mesh.triangles[hit.triangle];
-  const double b0 = 1.0 - hit.b1 - hit.b2;
-  return mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
+  const Tri& f = mesh.triangles[t];
+  const double b0 = 1.0 - b1 - b2;
+  return mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * b1 + mesh.velocities[f[2]] * b2;
+}
+
+bool VertexVelocity::within(const Vec3& p, double radius, Vec3& velocity, double& distance) const {
+  const ClosestHit hit = query_->closest(p, radius);
+  if (!hit.found) return false;
+  velocity = interpolate(hit.triangle, hit.b1, hit.b2);
+  distance = hit.distance;
+  return true;
+}
+
+Vec3 VertexVelocity::operator()(const Vec3& p) const {
+  Vec3 v;
+  double d;
+  for (const double radius : {near_ / 16, near_, 8 * near_, double(INFINITY)})
+    if (within(p, radius, v, d)) return v;
+  return Vec3{};
 }
 
 bool VertexVelocity::on_triangle(const Vec3& p, int t, double tolerance, Vec3& velocity) const {
@@ -32,8 +43,7 @@ bool VertexVelocity::on_triangle(const Vec3& p, int t, double tolerance, Vec3& v
   const Tri& f = mesh.triangles[t];
   const TrianglePoint q = closest_point_on_triangle(p, mesh.positions[f[0]], mesh.positions[f[1]], mesh.positions[f[2]]);
   if (!(norm2(q.point - p) <= tolerance * tolerance)) return false;
-  const double b0 = 1.0 - q.b1 - q.b2;
-  velocity = mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * q.b1 + mesh.velocities[f[2]] * q.b2;
+  velocity = interpolate(t, q.b1, q.b2);
   return true;
 }
 

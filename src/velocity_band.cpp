@@ -17,7 +17,6 @@
 #include <vector>
 
 #include "lapflow/parallel.hpp"
-#include "lapflow/surface_query.hpp"
 #include "lapflow/velocity.hpp"
 
 namespace lapflow {
@@ -98,7 +97,6 @@ Vec3 sample_band(const Band& band, const Vec3& p) {
 // which wastes queries on voxels several edges off the surface.
 void sample_vertex_velocity_by_rings(const VertexVelocity& vertex, const openvdb::MaskGrid& seeds, int band_voxels,
                                      double h, std::vector<openvdb::Coord>& coords, std::vector<Vec3s>& values) {
-  const TriMesh& mesh = vertex.query().mesh();
   openvdb::FloatGrid distance(std::numeric_limits<float>::infinity());
   openvdb::MaskGrid::Ptr reached = seeds.deepCopy();
   std::vector<openvdb::Coord> ring;
@@ -122,17 +120,10 @@ void sample_vertex_velocity_by_rings(const VertexVelocity& vertex, const openvdb
                 if (std::isfinite(dq)) bound = std::min(bound, double(dq) + h * std::sqrt(double(dx * dx + dy * dy + dz * dz)));
               }
         }
-        const ClosestHit hit = vertex.query().closest(p, bound * slack + 1e-12);
         Vec3 vel;
         double dist = bound;
-        if (hit.found) {
-          const Tri& f = mesh.triangles[hit.triangle];
-          const double b0 = 1.0 - hit.b1 - hit.b2;
-          vel = mesh.velocities[f[0]] * b0 + mesh.velocities[f[1]] * hit.b1 + mesh.velocities[f[2]] * hit.b2;
-          dist = hit.distance;
-        } else {
+        if (!vertex.within(p, bound * slack + 1e-12, vel, dist))
           vel = vertex(p);  // not expected: the bound holds a surface point
-        }
         v[i] = Vec3s{float(vel.x), float(vel.y), float(vel.z)};
         d[i] = float(dist * slack);  // rounded up: stays an upper bound
       }

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "io_test_helpers.hpp"
 #include "lapflow/demo_scene.hpp"
 #include "lapflow/errors.hpp"
 #include "lapflow/image.hpp"
@@ -29,17 +30,7 @@ fs::path fresh_dir(const std::string& name) {
 }
 
 BakeOptions small_bake(const fs::path& meshes, const fs::path& out) {
-  BakeOptions o;
-  const std::string ex = std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/pebbles";
-  o.exemplar_color = ex + ".color.png";
-  o.exemplar_feature = ex + ".feature.png";
-  o.exemplar_displacement = ex + ".disp.png";
-  o.mesh_pattern = (meshes / "m.%04d.ply").string();
-  o.out_dir = out.string();
-  o.name = "t";
-  o.atlas.resolution = 256;
-  o.aov = true;
-  return o;
+  return test::small_pebbles_bake(meshes.string(), out.string());
 }
 
 /// The demo's vortex, coarse, frames 1..n.

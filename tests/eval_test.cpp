@@ -113,17 +113,8 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
 // ---- small real bakes -----------------------------------------------------
 
 BakeOptions small_bake(const std::string& meshes, const std::string& out) {
-  BakeOptions o;
-  const std::string ex = std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/pebbles";
-  o.exemplar_color = ex + ".color.png";
-  o.exemplar_feature = ex + ".feature.png";
-  o.exemplar_displacement = ex + ".disp.png";
-  o.mesh_pattern = meshes + "/m.%04d.ply";
-  o.out_dir = out;
-  o.name = "t";
-  o.atlas.resolution = 256;
+  BakeOptions o = test::small_pebbles_bake(meshes, out);
   o.patch.radius = 0.15;
-  o.aov = true;
   return o;
 }
 

@@ -1,6 +1,6 @@
 #pragma once
 // Helpers for the input-side tests (readers, bad input, inspect): scratch
-// folders, raw file bytes, running the CLI.
+// folders, raw file bytes, running the CLI, a small bake's options.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -14,6 +14,7 @@
 #include <string>
 
 #include "lapflow/mesh.hpp"
+#include "lapflow/pipeline.hpp"
 
 namespace lapflow::test {
 
@@ -76,6 +77,22 @@ inline int run_command(const std::string& cmd, std::string* out, std::string* er
 inline std::string shared_data_dir() {
   const std::string dir = LAPFLOW_SOURCE_DIR "/../shared/data";
   return std::filesystem::is_directory(dir + "/dam_break") ? dir : std::string();
+}
+
+/// A small bake of `meshes_dir`/m.%04d.ply into `out_dir` with the shipped
+/// pebbles exemplar: name "t", a 256^2 atlas, AOVs on.
+inline BakeOptions small_pebbles_bake(const std::string& meshes_dir, const std::string& out_dir) {
+  BakeOptions o;
+  const std::string ex = std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/pebbles";
+  o.exemplar_color = ex + ".color.png";
+  o.exemplar_feature = ex + ".feature.png";
+  o.exemplar_displacement = ex + ".disp.png";
+  o.mesh_pattern = meshes_dir + "/m.%04d.ply";
+  o.out_dir = out_dir;
+  o.name = "t";
+  o.atlas.resolution = 256;
+  o.aov = true;
+  return o;
 }
 
 }  // namespace lapflow::test

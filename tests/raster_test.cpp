@@ -117,6 +117,18 @@ struct Scene {
   }
 };
 
+/// A 1 m plane of 8x8 quads with an N^2 atlas (split: two charts), the ramp
+/// exemplar of M^2 pixels (colour = (u, v, 0.5), flat feature map) and
+/// patch radius r: the set-up of most single-patch tests.
+Scene ramp_plane(int N, int M, double r, bool split = false) {
+  Scene sc;
+  sc.f = test::make_plane(8, 1.0, N, split);
+  sc.ex = test::ramp_exemplar(M, 0.f);
+  sc.rex = prepared(sc.ex);
+  sc.r = r;
+  return sc;
+}
+
 Scene random_scene(bool split, int count, uint64_t seed, int N = 256) {
   Scene sc;
   sc.f = test::make_plane(16, 1.0, N, split);
@@ -196,11 +208,7 @@ TEST(Raster, ErosionMatchesThePaperFormulaTexelByTexel) {
 TEST(Raster, FlatFeatureMapKeepsTheInscribedDisk) {
   // F = 0: kept iff sqrt(D)/M - eps >= 1 - w. With w = 1, M = max sqrt(D) ~ 1:
   // D >= eps^2 M^2, i.e. |uv - c| <= 0.5 (1 - eps^2 M^2): a disk of area ~ pi 0.495^2.
-  Scene sc;
-  sc.f = test::make_plane(8, 1.0, 256, false);
-  sc.ex = test::ramp_exemplar(64, 0.f);
-  sc.rex = prepared(sc.ex);
-  sc.r = 0.5;
+  Scene sc = ramp_plane(256, 64, 0.5);
   PatchSpec s;
   s.centre = {0.5, 0.5, 0};
   s.r = 0.5, s.half = 0.5, s.m = 8;
@@ -254,11 +262,7 @@ TEST(Raster, SeamFallbackAgreesWithThePaperAcrossCharts) {
 }
 
 TEST(Raster, OlderPatchHidesYoungerOneWhichRetires) {
-  Scene sc;
-  sc.f = test::make_plane(8, 1.0, 128, false);
-  sc.ex = test::ramp_exemplar(32, 0.f);
-  sc.rex = prepared(sc.ex);
-  sc.r = 0.3;
+  Scene sc = ramp_plane(128, 32, 0.3);
   PatchSpec a;
   a.centre = {0.5, 0.5, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 1.0;
   PatchSpec hidden = a;  // same place, lower weight: its kept region is inside a's
@@ -310,17 +314,21 @@ TEST(Raster, HoleFillingCoversEveryTexelFromNothing) {
   expect_matches_reference(sc, out);
 }
 
+/// The 60-patch two-chart random scene rasterized on `threads` threads:
+/// the images and the number of patches left.
+std::pair<FrameTextures, std::size_t> bake_random_scene(int threads, RasterMode mode) {
+  set_thread_count(threads);
+  Scene sc = random_scene(true, 60, 99);
+  RasterOptions o;
+  o.mode = mode;
+  FrameTextures out = sc.run(o);
+  set_thread_count(0);
+  return {std::move(out), sc.patches.patches.size()};
+}
+
 TEST(Raster, SameImagesForOneAndTwoThreads) {
-  auto bake = [](int threads) {
-    set_thread_count(threads);
-    Scene sc = random_scene(true, 60, 99);
-    RasterOptions o;
-    FrameTextures out = sc.run(o);
-    set_thread_count(0);
-    return std::make_pair(std::move(out), sc.patches.patches.size());
-  };
-  const auto [a, na] = bake(1);
-  const auto [b, nb] = bake(2);
+  const auto [a, na] = bake_random_scene(1, RasterMode::Erosion);
+  const auto [b, nb] = bake_random_scene(2, RasterMode::Erosion);
   EXPECT_EQ(na, nb);
   EXPECT_EQ(a.stats.patches_born, b.stats.patches_born);
   EXPECT_TRUE(a.color.pixels == b.color.pixels);
@@ -416,11 +424,7 @@ TEST(Raster, AdvectModeNeitherErodesNorRetires) {
   // Weight 0 everywhere: Erosion mode keeps nothing, Advect mode keeps the
   // whole uv square, and the hidden duplicate patch is not retired.
   auto scene = [] {
-    Scene sc;
-    sc.f = test::make_plane(8, 1.0, 128, false);
-    sc.ex = test::ramp_exemplar(32, 0.f);
-    sc.rex = prepared(sc.ex);
-    sc.r = 0.25;
+    Scene sc = ramp_plane(128, 32, 0.25);
     PatchSpec a;
     a.centre = {0.5, 0.5, 0}, a.r = 0.25, a.half = 0.25, a.w0 = 0;
     sc.add(a);
@@ -480,10 +484,7 @@ TEST(Raster, ChartNoPatchReachesTakesTheNearestPatch) {
   // The rest of the left chart takes neighbours' patches, the right chart
   // (no covered texel to spread from) the nearest patch triangle in 3D.
   for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
-    Scene sc;
-    sc.f = test::make_plane(8, 1.0, 96, true);
-    sc.ex = test::ramp_exemplar(32, 0.f);
-    sc.rex = prepared(sc.ex);
+    Scene sc = ramp_plane(96, 32, 0.1, true);
     PatchSpec a;
     a.centre = {0.3, 0.5, 0}, a.r = 0.15, a.half = 0.15, a.w0 = 1;
     sc.add(a);
@@ -507,11 +508,7 @@ TEST(Raster, ChartNoPatchReachesTakesTheNearestPatch) {
 TEST(Raster, NewbornsThatKeepNothingStillCoverTheirHoles) {
   // Every newborn is folded (delta = inf on all its triangles, as on a droplet
   // smaller than a patch): none is drawn, yet every texel gets one of them.
-  Scene sc;
-  sc.f = test::make_plane(8, 1.0, 96, false);
-  sc.ex = test::ramp_exemplar(32, 0.f);
-  sc.rex = prepared(sc.ex);
-  sc.r = 0.2;
+  Scene sc = ramp_plane(96, 32, 0.2);
   const PatchMaker base = sc.maker();
   const PatchMaker folded = [&](const SurfacePoint& at, uint32_t id) {
     std::optional<Patch> p = base(at, id);
@@ -533,11 +530,7 @@ TEST(Raster, NewbornsThatKeepNothingStillCoverTheirHoles) {
 // covering patches, checked against the analytic (u, v, w) of two patches on
 // the ramp exemplar (colour = (u, v, 0.5)).
 TEST(RasterBlend, OverlapIsTheExactWeightedAverage) {
-  Scene sc;
-  sc.f = test::make_plane(8, 1.0, 192, false);
-  sc.ex = test::ramp_exemplar(64, 0.f);
-  sc.rex = prepared(sc.ex);
-  sc.r = 0.3;
+  Scene sc = ramp_plane(192, 64, 0.3);
   PatchSpec a;
   a.centre = {0.4, 0.45, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 0.8, a.wx = 0.5;  // affine weight: exact
   PatchSpec b = a;
@@ -592,11 +585,7 @@ TEST(RasterBlend, OverlapIsTheExactWeightedAverage) {
 }
 
 TEST(RasterBlend, HiddenPatchesContributeAndOnlyWeightlessOnesRetire) {
-  Scene sc;
-  sc.f = test::make_plane(8, 1.0, 128, false);
-  sc.ex = test::ramp_exemplar(32, 0.f);
-  sc.rex = prepared(sc.ex);
-  sc.r = 0.3;
+  Scene sc = ramp_plane(128, 32, 0.3);
   PatchSpec a;
   a.centre = {0.5, 0.5, 0}, a.r = 0.3, a.half = 0.3, a.w0 = 1.0;
   PatchSpec hidden = a;  // erosion would retire it (see OlderPatchHidesYoungerOneWhichRetires)
@@ -653,17 +642,8 @@ TEST(RasterBlend, GhostingLowersContrastAgainstErosion) {
 }
 
 TEST(RasterBlend, SameImagesForOneAndTwoThreads) {
-  auto bake = [](int threads) {
-    set_thread_count(threads);
-    Scene sc = random_scene(true, 60, 99);
-    RasterOptions o;
-    o.mode = RasterMode::Blend;
-    FrameTextures out = sc.run(o);
-    set_thread_count(0);
-    return std::make_pair(std::move(out), sc.patches.patches.size());
-  };
-  const auto [a, na] = bake(1);
-  const auto [b, nb] = bake(2);
+  const auto [a, na] = bake_random_scene(1, RasterMode::Blend);
+  const auto [b, nb] = bake_random_scene(2, RasterMode::Blend);
   EXPECT_EQ(na, nb);
   EXPECT_EQ(a.stats.covered_texels, a.stats.chart_texels);
   EXPECT_EQ(a.stats.patches_born, b.stats.patches_born);

@@ -32,8 +32,15 @@ class VertexVelocity {
   /// search's: the two answers differ by at most tolerance times the
   /// velocity's gradient.
   bool on_triangle(const Vec3& p, int t, double tolerance, Vec3& velocity) const;
+  /// The velocity at p's closest surface point when one lies within `radius`
+  /// metres (its distance in `distance`), otherwise false. The closest point
+  /// within a radius that holds one is the closest point: same answer as
+  /// operator(), fewer nodes visited when a good radius is known.
+  bool within(const Vec3& p, double radius, Vec3& velocity, double& distance) const;
 
  private:
+  /// Per-vertex velocities interpolated at barycentrics (b1, b2) of triangle t.
+  Vec3 interpolate(int t, double b1, double b2) const;
   const SurfaceQuery* query_;
   double near_;
 };
