@@ -33,9 +33,13 @@ double peak_rss_mb() {
 
 void keep_freed_memory_for_reuse() {
   // No mmap'd chunks (each one's pages are zeroed by the kernel again after
-  // every free), and never trim the heap's top back to the kernel.
+  // every free), never trim the heap's top back to the kernel, and one arena
+  // for every thread: a secondary arena maps any block over its 64 MiB heap
+  // size with mmap even when M_MMAP_MAX is 0. Small blocks still come from
+  // each thread's tcache, so the shared arena's lock is rarely taken.
   mallopt(M_MMAP_MAX, 0);
   mallopt(M_TRIM_THRESHOLD, INT_MAX);
+  mallopt(M_ARENA_MAX, 1);
 }
 
 namespace {

@@ -92,7 +92,11 @@ double peak_rss_mb();
 /// frame at 6144^2 (images, texel maps, EXR conversion buffers); glibc serves
 /// blocks over 32 MiB with fresh mmap pages, which the kernel zeroes on first
 /// touch, page by page, every frame (a fifth of the raster's time). After this
-/// call they come from the heap and are reused. Process-wide: call it once
+/// call they come from the heap and are reused. All threads share that one
+/// heap: a thread's own arena grows in 64 MiB pieces and serves anything
+/// larger from mmap whatever the settings, and the texel map (built on the
+/// read-ahead thread) and the EXR half buffers are allocated off the main
+/// thread. Process-wide: call it once
 /// from main(), before any thread starts (the lapflow CLI and the benchmark
 /// do). Peak memory is unchanged; memory freed between frames stays mapped.
 void keep_freed_memory_for_reuse();
