@@ -14,8 +14,9 @@ struct PatchMesh {
   std::vector<Tri> triangles;
 };
 
-/// Least-squares conformal map (Levy et al. 2002) solved with Eigen: `uv`
-/// gets one coordinate per vertex; vertices `pin_a` and `pin_b` are pinned at
+/// Least-squares conformal map (Levy et al. 2002) solved directly (exact
+/// minimum degree ordering, sparse L D L^H; beyond 2048 unknowns the Eigen
+/// solver of lscm_flatten_reference): `uv` gets one coordinate per vertex; vertices `pin_a` and `pin_b` are pinned at
 /// `uv_a` and `uv_b` (pins < 0: two far-apart border vertices chosen here, at
 /// (0,0) and (their 3D distance, 0)). The energy is that of holomorphic maps,
 /// so triangles counter-clockwise in 3D stay counter-clockwise in uv (up to
@@ -24,8 +25,9 @@ struct PatchMesh {
 bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
                   Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
 
-/// The previous solver (triplets, SimplicialLDLT with AMD ordering), kept as
-/// the reference the tests compare lscm_flatten against. Same contract.
+/// The previous solver (triplets, Eigen SimplicialLDLT with AMD ordering): the
+/// reference the tests compare lscm_flatten against, and lscm_flatten's path
+/// for systems too large for its bit-matrix ordering. Same contract.
 bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
                             Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
 
