@@ -207,8 +207,36 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
     else v[0] = index(i + 1, j), v[1] = index(i + 1, j + 1), v[2] = index(i, j + 1);
   };
   const int cells = width * (2 * J + 1);
-  std::vector<uint8_t>& candidate = scratch.candidate;  // 0 no, 1 within r and inside the cut, 2 kept
+  // 0 no, 1 within r and inside the cut, 2 kept, 3 holds a border vertex of the cut
+  std::vector<uint8_t>& candidate = scratch.candidate;
   candidate.assign(2 * std::size_t(cells), 0);
+  // A hole smaller than a lattice triangle crosses none of its edges: what
+  // gives it away is its border inside the triangle. Every lattice triangle
+  // holding a border vertex of the cut (on its closed area) is left out; the
+  // cut's outer border lies beyond the kept triangles (the cut reaches
+  // r + L), so this only removes triangles at holes, gaps and creases.
+  auto block = [&](int i, int j, int type) {
+    if (i >= -I && i < I && j >= -J && j < J) candidate[2 * index(i, j) + type] = 3;
+  };
+  for (int32_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      if (neighbour[3 * t + k] >= 0) continue;
+      for (int end = 0; end < 2; ++end) {
+        const Vec2& q = flat[cut.triangles[t][(k + end) % 3]];
+        if (dot(q, q) > reach * reach) continue;
+        // Lattice coordinates, rounded so that u, v are in [-e, 1 - e).
+        const double e = 1e-9, y = q.y / h, x = q.x / L - 0.5 * y;
+        const int j = int(std::floor(y + e)), i = int(std::floor(x + e));
+        const double u = x - i, v = y - j;
+        const int type = u + v < 1 ? 0 : 1;
+        block(i, j, type);
+        // On a lattice edge or point: the triangles on the other side too.
+        if (std::fabs(u + v - 1) < e) block(i, j, 1 - type);
+        if (u < e) block(i - 1, j, 1);
+        if (v < e) block(i, j - 1, 1);
+        if (u < e && v < e) block(i - 1, j - 1, 1), block(i - 1, j, 0), block(i, j - 1, 0);
+      }
+    }
   int nearest = -1;
   double nearest_d = INFINITY;
   for (int j = -J; j < J; ++j)
@@ -217,6 +245,7 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
         const int c = 2 * index(i, j) + type;
         int v[3];
         corners(c, v);
+        if (candidate[c] == 3) continue;
         const LatticePoint &a = lattice[v[0]], &b = lattice[v[1]], &d = lattice[v[2]];
         if (a.triangle < 0 || b.triangle < 0 || d.triangle < 0) continue;
         const double dist = norm(closest_point_on_triangle(p, a.lifted, b.lifted, d.lifted).point - p);
