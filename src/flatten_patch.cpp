@@ -203,10 +203,12 @@ LAPFLOW_POPCOUNT_CLONES Elimination minimum_degree(const VertexAdjacency& adj, c
           row_b[x] = r;
           d += std::popcount(r);
         }
-        remove(b);
-        degree[b] = d;
-        insert(b);
-        min_degree = std::min(min_degree, d);
+        if (d != degree[b]) {
+          remove(b);
+          degree[b] = d;
+          insert(b);
+          min_degree = std::min(min_degree, d);
+        }
       }
   }
 
@@ -385,6 +387,9 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
     const double l1 = norm(e1);
     if (!(d > 1e-300) || !(l1 > 0)) continue;  // degenerate: no conformality to ask for
     ++used;
+    // The reference's local frame, operation for operation: on a triangle
+    // whose area is rounding noise, q2.y = dot(e2, Y) is not d / l1, and
+    // the map depends on which one is used.
     const Vec3 X = e1 / l1, Y = cross(n / d, X);
     const Vec2 q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
     const double w = 1.0 / std::sqrt(2 * d);
