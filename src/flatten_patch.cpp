@@ -75,19 +75,25 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
     }
   for (int v = 0; v < nv; ++v) start[v + 1] += start[v];
   std::vector<int> list(start[nv]), entry(6 * std::size_t(nt), -1), fill(start.begin(), start.end() - 1);
+  std::vector<int> self_edges;  // per vertex, edges {p, p} of triangles with a repeated vertex
   for (int f = 0; f < nt; ++f) {
     const Tri& t = m.triangles[f];
     for (int k = 0; k < 3; ++k) {
       const int p = t[k], q = t[(k + 1) % 3];
       a.used[p] = 1;
       if (q == p) {
-        a.on_border[p] = 1;  // a degenerate edge: used once, as the reference sees it
+        if (self_edges.empty()) self_edges.assign(nv, 0);
+        ++self_edges[p];
         continue;
       }
       entry[6 * f + 2 * k] = fill[p], list[fill[p]++] = q;
       entry[6 * f + 2 * k + 1] = fill[q], list[fill[q]++] = p;
     }
   }
+  // An edge {p, p} used once is a border edge too, for the pins to be those
+  // of lscm_flatten_reference.
+  for (int v = 0; v < int(self_edges.size()); ++v)
+    if (self_edges[v] == 1) a.on_border[v] = 1;
   // Deduplicate each list with a mark per neighbour (no sort): the first
   // entry of u under v makes a slot, later ones point to it and count a use.
   a.offset.assign(nv + 1, 0);

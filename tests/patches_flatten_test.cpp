@@ -260,6 +260,8 @@ TEST(PatchesFlatten, SolverAgreesWithTheEigenReference) {
     m.positions.push_back((m.positions[0] + m.positions[1]) * 0.5);  // on the edge 0-1: a zero-area triangle
     m.triangles.push_back({0, 1, n});
     m.triangles.push_back({2, 2, 3});
+    m.triangles.push_back({m.triangles[30][0], m.triangles[30][0], m.triangles[30][1]});
+    m.triangles.push_back({m.triangles[30][0], m.triangles[30][0], m.triangles[30][2]});
     m.positions.push_back({5, 5, 5});  // unused
     m.positions.push_back(m.positions[10] + Vec3{0, 0, 0.05});
     m.triangles.push_back({m.triangles[20][0], m.triangles[20][1], n + 2});  // a third triangle on an edge
