@@ -127,8 +127,8 @@ constexpr int kMaxMinimumDegreeSize = 2048;
 // Counting set bits is the inner loop of the ordering below; std::popcount
 // is a library call unless the target has a popcount instruction, so on x86-64
 // builds without one the function is also compiled for it and picked at load
-// time (GCC/Clang function multi-versioning).
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__POPCNT__)
+// time (GCC function multi-versioning).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__POPCNT__)
 #define LAPFLOW_POPCOUNT_CLONES __attribute__((target_clones("popcnt", "default")))
 #else
 #define LAPFLOW_POPCOUNT_CLONES
@@ -250,9 +250,9 @@ Elimination minimum_degree(const VertexAdjacency& adj, const std::vector<int>& i
 
 // Sparse L D L^H factorization of a Hermitian matrix (up-looking, after
 // Davis's LDL, the algorithm of Eigen's SimplicialLDLT, with the pattern from
-// the ordering instead of an elimination tree) with complex numbers as
-// separate real and imaginary parts, so the inner loops are plain
-// multiply-adds.
+// the ordering instead of an elimination tree). Complex numbers are pairs of
+// doubles and products are written out: std::complex's product checks for
+// infinities on every multiply.
 class HermitianLdlt {
  public:
   // The matrix is that of lscm_flatten: diag[v] and off_re/off_im[slot] =
