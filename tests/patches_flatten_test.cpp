@@ -267,7 +267,7 @@ TEST(PatchesFlatten, SolverAgreesWithTheEigenReference) {
     m.triangles.push_back({m.triangles[20][0], m.triangles[20][1], n + 2});  // a third triangle on an edge
     cases.push_back({"degenerate", m});
   }
-  // Over 2048 unknowns lscm_flatten hands the system to the reference.
+  // Over 1536 unknowns lscm_flatten hands the system to the reference.
   cases.push_back({"large", tilted_plane(48, 0.6)});
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
