@@ -96,6 +96,7 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
     if (self_edges[v] == 1) a.on_border[v] = 1;
   // Deduplicate each list with a mark per neighbour (no sort): the first
   // entry of u under v makes a slot, later ones point to it and count a use.
+  // Written without branches: first or repeated is a coin toss per entry.
   a.offset.assign(nv + 1, 0);
   a.neighbour.resize(list.size());
   std::vector<int> mark(nv, -1), slot_of(nv), uses(list.size()), entry_slot(list.size());
@@ -103,16 +104,18 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
   for (int v = 0; v < nv; ++v) {
     for (int e = start[v]; e < start[v + 1]; ++e) {
       const int u = list[e];
-      if (mark[u] != v) {
-        mark[u] = v, slot_of[u] = slots, uses[slots] = 0;
-        a.neighbour[slots++] = u;
-      }
-      ++uses[slot_of[u]];
-      entry_slot[e] = slot_of[u];
+      const bool fresh = mark[u] != v;
+      const int slot = fresh ? slots : slot_of[u];
+      mark[u] = v, slot_of[u] = slot;
+      a.neighbour[slots] = u;  // kept only when fresh (slots <= e: in range)
+      uses[slot] = (fresh ? 0 : uses[slot]) + 1;
+      entry_slot[e] = slot;
+      slots += fresh;
     }
     a.offset[v + 1] = slots;
-    for (int s = a.offset[v]; s < slots; ++s)
-      if (uses[s] == 1) a.on_border[v] = 1;
+    bool border = false;
+    for (int s = a.offset[v]; s < slots; ++s) border |= uses[s] == 1;
+    a.on_border[v] |= border;
   }
   a.neighbour.resize(slots);
   a.triangle_slot.resize(entry.size());
@@ -170,18 +173,18 @@ LAPFLOW_POPCOUNT_CLONES Elimination minimum_degree(const VertexAdjacency& adj, c
       if (b >= 0) row[b >> 6] |= uint64_t(1) << (b & 63), ++degree[a];
     }
   }
-  // Degree buckets: doubly linked lists, newest first.
-  std::vector<int> head(nf + 1, -1), next(nf, -1), prev(nf, -1);
+  // Degree buckets: circular doubly linked lists, newest first; node nf + d
+  // is the head of degree d (no branches on empty lists).
+  std::vector<int> next(2 * std::size_t(nf) + 1), prev(2 * std::size_t(nf) + 1);
+  for (int h = nf; h <= 2 * nf; ++h) next[h] = prev[h] = h;
   auto insert = [&](int a) {
-    const int d = degree[a];
-    next[a] = head[d], prev[a] = -1;
-    if (head[d] >= 0) prev[head[d]] = a;
-    head[d] = a;
+    const int h = nf + degree[a];
+    next[a] = next[h], prev[a] = h;
+    prev[next[h]] = a, next[h] = a;
   };
   auto remove = [&](int a) {
-    if (prev[a] >= 0) next[prev[a]] = next[a];
-    else head[degree[a]] = next[a];
-    if (next[a] >= 0) prev[next[a]] = prev[a];
+    next[prev[a]] = next[a];
+    prev[next[a]] = prev[a];
   };
   for (int a = nf - 1; a >= 0; --a) insert(a);
   Elimination e;
@@ -191,8 +194,8 @@ LAPFLOW_POPCOUNT_CLONES Elimination minimum_degree(const VertexAdjacency& adj, c
   entries.reserve(std::size_t(nf) * 12);
   int min_degree = 0;
   for (int step = 0; step < nf; ++step) {
-    while (head[min_degree] < 0) ++min_degree;
-    const int a = head[min_degree];
+    while (next[nf + min_degree] == nf + min_degree) ++min_degree;
+    const int a = next[nf + min_degree];
     remove(a);
     eliminated[step] = a;
     // a's row now is the pattern of its column of L.
