@@ -214,12 +214,10 @@ LAPFLOW_POPCOUNT_CLONES Elimination minimum_degree(const VertexAdjacency& adj, c
           row_b[x] = r;
           d += std::popcount(r);
         }
-        if (d != degree[b]) {
-          remove(b);
-          degree[b] = d;
-          insert(b);
-          min_degree = std::min(min_degree, d);
-        }
+        remove(b);
+        degree[b] = d;
+        insert(b);
+        min_degree = std::min(min_degree, d);
       }
   }
 
