@@ -7,8 +7,9 @@
 // such small systems in AMD's bookkeeping, triplet sorting and symbolic
 // analysis; lscm_flatten builds the matrix on the vertex adjacency, orders it
 // by exact minimum degree on a bit matrix (which also yields the factor's
-// pattern) and factors it with a short up-looking LDL^H: 2.4x faster on the
-// seeded patches of ~230 vertices, same map to rounding.
+// pattern) and factors it with a short up-looking LDL^H: 0.086 against
+// 0.233 ms (thread CPU) on seeded patches of ~230 vertices, same map to
+// rounding.
 #include <Eigen/Sparse>
 
 #include <algorithm>
@@ -124,9 +125,9 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
 }
 
 // Beyond this many unknowns the bit-matrix ordering below grows as n^2;
-// larger systems go to the Eigen solver (AMD ordering).
-// Measured on curved grids: 0.98 against 1.23 ms at 1024 vertices, even at
-// about 2000.
+// larger systems go to the Eigen solver (AMD ordering). On curved grids this
+// solver takes 0.37 ms against Eigen's 0.51 at 529 vertices, 1.0 against 1.2
+// at 1024, and the same 2.8 ms at 2025.
 constexpr int kMaxMinimumDegreeSize = 1536;
 
 // Counting set bits is the inner loop of the ordering below; std::popcount
