@@ -73,13 +73,15 @@ SurfaceAdjacency build_surface_adjacency(const TriMesh& mesh) {
 namespace {
 
 using detail::PatchMesh;
+using detail::PatchPath;
 
 // Step 2: fluid triangles within distance r of p, facing along n_p, edge-
 // connected to p's triangle, as a manifold mesh of their own. Edges that are
 // non-manifold or inconsistently oriented in the fluid are not crossed, so the
 // patch is a valid oriented surface.
+// `fluid_triangles` (when given) gets the fluid triangle of each patch triangle.
 PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_triangle, const Vec3& p,
-                    const Vec3& n_p, double r) {
+                    const Vec3& n_p, double r, std::vector<int32_t>* fluid_triangles = nullptr) {
   const double r2 = r * r;
   auto accept = [&](int t) {
     const Tri& f = fluid.triangles[t];
@@ -131,6 +133,7 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     m.triangles.push_back(g);
   }
   detail::split_nonmanifold_vertices(m);
+  if (fluid_triangles) fluid_triangles->assign(kept.begin(), kept.end());
   return m;
 }
 
@@ -200,9 +203,12 @@ Vec2 uv_direction(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec2& u0
 
 }  // namespace
 
-std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
-                                  const SurfacePoint& at, uint32_t id, int frame, const PatchOptions& options,
-                                  const WeightOptions& weights) {
+namespace detail {
+
+std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
+                                         const SurfacePoint& at, uint32_t id, int frame, const PatchOptions& options,
+                                         const WeightOptions& weights, PatchTrace& trace) {
+  trace = {};
   const TriMesh& fluid = surface.mesh();
   const double r = options.radius;
   if (fluid.triangles.empty() || !(r > 0) || !is_finite(at.position)) return std::nullopt;
@@ -242,10 +248,29 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
       m.positions[v] = hit.point;
     }
   };
-  PatchMesh mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, r);
   std::vector<Vec2> uv;
   bool flat = false;
-  if (options.remesh) {
+  PatchMesh mesh;
+  if (options.remesh && options.remesher == Remesher::Grid) {
+    // Resampling needs the fluid up to one lattice edge beyond r (the
+    // triangles within r reach that far); where the cut is no height field
+    // over the tangent plane, the fast remesher takes the usual cut below.
+    // The remesher's edges lie between 4/5 and 4/3 of its target and average
+    // 0.83 of it (0.139 r for r/6 on dam_break); a lattice of 0.8 of the
+    // target gives the same vertex density, so the same weights (B_V = 0 on
+    // the border weighs more in a coarser patch). docs/patches.md.
+    constexpr double kLatticeEdge = 0.8;
+    const double edge = kLatticeEdge * options.remesh_edge * r;
+    std::vector<int32_t> cut_triangles;
+    const PatchMesh wide = cut_patch(fluid, adjacency, seed, at.position, n_p, r + edge, &cut_triangles);
+    trace.grid = detail::grid_resample(surface, wide, cut_triangles, at.position, n_p, r, edge, mesh, under);
+    if (trace.grid == detail::GridResult::Resampled && detail::lscm_flatten(mesh, uv)) {
+      flat = true;
+      trace.path = PatchPath::Grid;
+    }
+  }
+  if (!flat) mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, r);
+  if (options.remesh && !flat) {
     PatchMesh remeshed = mesh;
     // When the fluid triangles are much larger than r the cut is far larger
     // than the patch; cap the remeshed size (before trimming) so one patch
@@ -263,10 +288,12 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
       if (detail::lscm_flatten(remeshed, uv)) {
         mesh = std::move(remeshed);
         flat = true;
+        trace.path = PatchPath::Remeshed;
       }
     }
   }
   if (!flat) {
+    trace.path = PatchPath::Cut;
     snap(mesh);
     if (!detail::lscm_flatten(mesh, uv)) return std::nullopt;
   }
@@ -313,6 +340,15 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
   patch.surface_triangle = std::move(under);
   patch_weights(fluid, r, weights, patch);
   return patch;
+}
+
+}  // namespace detail
+
+std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
+                                  const SurfacePoint& at, uint32_t id, int frame, const PatchOptions& options,
+                                  const WeightOptions& weights) {
+  detail::PatchTrace trace;
+  return detail::create_patch_traced(surface, adjacency, at, id, frame, options, weights, trace);
 }
 
 std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfacePoint& at, uint32_t id, int frame,

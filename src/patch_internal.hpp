@@ -14,8 +14,10 @@ struct PatchMesh {
   std::vector<Tri> triangles;
 };
 
-/// Least-squares conformal map (Levy et al. 2002) solved with Eigen: `uv`
-/// gets one coordinate per vertex; vertices `pin_a` and `pin_b` are pinned at
+/// Least-squares conformal map (Levy et al. 2002) solved directly (exact
+/// minimum degree ordering, sparse L D L^H; beyond 1536 unknowns the Eigen
+/// solver of lscm_flatten_reference): `uv` gets one coordinate per vertex;
+/// vertices `pin_a` and `pin_b` are pinned at
 /// `uv_a` and `uv_b` (pins < 0: two far-apart border vertices chosen here, at
 /// (0,0) and (their 3D distance, 0)). The energy is that of holomorphic maps,
 /// so triangles counter-clockwise in 3D stay counter-clockwise in uv (up to
@@ -23,6 +25,12 @@ struct PatchMesh {
 /// must be edge-connected.
 bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
                   Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
+
+/// The previous solver (triplets, Eigen SimplicialLDLT with AMD ordering): the
+/// reference the tests compare lscm_flatten against, and lscm_flatten's path
+/// for systems too large for its bit-matrix ordering. Same contract.
+bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
+                            Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
 
 /// The conformal energy LSCM minimizes (sum over triangles of area times the
 /// squared Cauchy-Riemann residual), in uv units squared.
@@ -58,5 +66,44 @@ void split_nonmanifold_vertices(PatchMesh& mesh);
 /// +inf when either triangle is degenerate.
 double triangle_distortion(const Vec2& u0, const Vec2& u1, const Vec2& u2, const Vec3& p0, const Vec3& p1,
                            const Vec3& p2, double scale, double* s1 = nullptr, double* s2 = nullptr);
+
+// ---- Tangent-plane resampling (patch_resample.cpp) ----
+
+/// What grid_resample did with a cut.
+enum class GridResult {
+  Resampled,  ///< `out` holds the resampled patch
+  Steep,      ///< a cut triangle tilts more than acos(min_cos) from n_p (or faces away): not a height field
+  Overlap,    ///< a lattice point lies strictly inside two projected triangles: the cut folds over itself
+  TooFew,     ///< fewer than a quarter of the triangles a flat disk of radius r would get
+};
+
+/// Resamples a cut (the fluid triangles `cut_triangles[t]` copied into `cut`,
+/// as cut_patch makes it; it should reach r + edge from p) on an equilateral
+/// lattice of edge `edge` (metres) laid in the plane through p normal to n_p,
+/// each lattice point lifted onto the fluid triangle under it. Keeps the
+/// lattice triangles within distance r of p (point-triangle distance, as
+/// trim_to_ball) whose edges stay inside the cut, then the edge-connected
+/// piece holding the one nearest p. Every output vertex is on the fluid with
+/// its fluid triangle in `under`; every triangle's normal has a positive dot
+/// with n_p. Anything but Resampled leaves `out` and `under` unspecified.
+GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, const std::vector<int32_t>& cut_triangles,
+                         const Vec3& p, const Vec3& n_p, double r, double edge, PatchMesh& out,
+                         std::vector<int32_t>& under, double min_cos = 0.5);
+
+/// How create_patch made a patch's mesh.
+enum class PatchPath {
+  Grid,      ///< grid_resample (Remesher::Grid on a height-field cut)
+  Remeshed,  ///< the cut remeshed (fast or CGAL), trimmed to r and snapped
+  Cut,       ///< the cut itself, snapped (remeshing off or failed)
+};
+struct PatchTrace {
+  PatchPath path = PatchPath::Cut;
+  GridResult grid = GridResult::Resampled;  ///< what grid_resample said (when it was tried)
+};
+
+/// create_patch, also telling which path it took (for tests and measurements).
+std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
+                                         const SurfacePoint& at, uint32_t id, int frame, const PatchOptions& options,
+                                         const WeightOptions& weights, PatchTrace& trace);
 
 }  // namespace lapflow::detail

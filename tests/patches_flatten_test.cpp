@@ -47,6 +47,31 @@ Vec3 point_at_uv(const Patch& p, const Vec2& q, int* triangle = nullptr) {
   return {NAN, NAN, NAN};
 }
 
+// The faces of an icosphere whose centroid passes `keep`, reindexed.
+template <class Keep>
+PatchMesh sphere_piece(int subdivisions, Keep keep) {
+  const TriMesh s = test::icosphere(subdivisions, 1.0);
+  PatchMesh m;
+  std::vector<int> local(s.positions.size(), -1);
+  for (const Tri& f : s.triangles) {
+    if (!keep((s.positions[f[0]] + s.positions[f[1]] + s.positions[f[2]]) / 3.0)) continue;
+    Tri g;
+    for (int k = 0; k < 3; ++k) {
+      if (local[f[k]] < 0) local[f[k]] = int(m.positions.size()), m.positions.push_back(s.positions[f[k]]);
+      g[k] = local[f[k]];
+    }
+    m.triangles.push_back(g);
+  }
+  return m;
+}
+
+// Largest uv difference over the largest uv coordinate.
+double relative_uv_difference(const std::vector<Vec2>& a, const std::vector<Vec2>& b) {
+  double diff = 0, scale = 0;
+  for (std::size_t v = 0; v < a.size(); ++v) diff = std::max(diff, norm(a[v] - b[v])), scale = std::max(scale, norm(b[v]));
+  return diff / scale;
+}
+
 }  // namespace
 
 TEST(PatchesFlatten, PlanarPatchIsAnIsometryUpToScale) {
@@ -211,4 +236,67 @@ TEST(PatchesCreate, RemeshingCostStaysBoundedWhenFluidTrianglesDwarfThePatch) {
   EXPECT_LT(p->triangles.size(), 4000u);
   EXPECT_LT(norm(point_at_uv(*p, {0.5, 0.5}) - Vec3{5.2, 4.1, 0}), 1e-9);
   for (float d : p->triangle_delta) EXPECT_NEAR(d, 1.0, 1e-3);
+}
+
+TEST(PatchesFlatten, SolverAgreesWithTheEigenReference) {
+  // lscm_flatten (minimum degree ordering, own LDL^H) against the previous
+  // solver (Eigen SimplicialLDLT, AMD): same pins, same map to rounding.
+  struct Case {
+    const char* name;
+    PatchMesh mesh;
+    int pin_a = -1, pin_b = -1;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"jittered plane", tilted_plane(14, 0.6)});
+  cases.push_back({"cap", sphere_piece(4, [](const Vec3& c) { return c.z > 0.55; })});
+  cases.push_back({"cap with a hole",
+                   sphere_piece(4, [](const Vec3& c) { return c.z > 0.3 && norm(c - normalized(Vec3{0.3, 0.1, 1})) > 0.2; })});
+  cases.push_back({"pinned cap", sphere_piece(3, [](const Vec3& c) { return c.z > 0.4; }), 0, 7});
+  {
+    // Degenerate triangles (zero area, a repeated vertex), a vertex no
+    // triangle uses and an edge shared by three triangles.
+    PatchMesh m = tilted_plane(8, 0.5);
+    const int n = int(m.positions.size());
+    m.positions.push_back((m.positions[0] + m.positions[1]) * 0.5);  // on the edge 0-1: a zero-area triangle
+    m.triangles.push_back({0, 1, n});
+    m.triangles.push_back({2, 2, 3});
+    m.triangles.push_back({m.triangles[30][0], m.triangles[30][0], m.triangles[30][1]});
+    m.triangles.push_back({m.triangles[30][0], m.triangles[30][0], m.triangles[30][2]});
+    m.positions.push_back({5, 5, 5});  // unused
+    m.positions.push_back(m.positions[10] + Vec3{0, 0, 0.05});
+    m.triangles.push_back({m.triangles[20][0], m.triangles[20][1], n + 2});  // a third triangle on an edge
+    cases.push_back({"degenerate", m});
+  }
+  // Over 1536 unknowns lscm_flatten hands the system to the reference.
+  cases.push_back({"large", tilted_plane(48, 0.6)});
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::vector<Vec2> mine, reference;
+    const Vec2 uv_a{0.1, 0.2}, uv_b{0.9, 0.4};
+    ASSERT_TRUE(detail::lscm_flatten(c.mesh, mine, c.pin_a, c.pin_b, uv_a, uv_b));
+    ASSERT_TRUE(detail::lscm_flatten_reference(c.mesh, reference, c.pin_a, c.pin_b, uv_a, uv_b));
+    ASSERT_EQ(mine.size(), reference.size());
+    EXPECT_LT(relative_uv_difference(mine, reference), 1e-9);
+    // The energy agrees to rounding (uv spans about 1, so 1e-15 is noise; a
+    // planar patch has energy 0 up to that).
+    const double e_mine = detail::lscm_energy(c.mesh, mine), e_ref = detail::lscm_energy(c.mesh, reference);
+    EXPECT_NEAR(e_mine, e_ref, 1e-9 * e_ref + 1e-15);
+  }
+}
+
+TEST(PatchesFlatten, SolverFailsWhereTheReferenceFails) {
+  std::vector<Vec2> uv{{7, 7}};
+  // Every triangle degenerate: nothing to solve.
+  const PatchMesh flat{{{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}}, {{0, 1, 2}, {1, 2, 3}}};
+  EXPECT_FALSE(detail::lscm_flatten_reference(flat, uv));
+  EXPECT_FALSE(detail::lscm_flatten(flat, uv));
+  // One triangle: both free vertices pinned, no unknown left.
+  const PatchMesh one{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  std::vector<Vec2> a, b;
+  EXPECT_EQ(detail::lscm_flatten(one, a), detail::lscm_flatten_reference(one, b));
+  EXPECT_EQ(a, b);
+  // Too few vertices.
+  const PatchMesh tiny{{{0, 0, 0}, {1, 0, 0}}, {{0, 1, 1}}};
+  EXPECT_FALSE(detail::lscm_flatten(tiny, uv));
+  EXPECT_EQ(uv, (std::vector<Vec2>{{7, 7}}));  // untouched on failure
 }

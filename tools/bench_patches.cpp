@@ -65,14 +65,16 @@ std::size_t vertex_total(const PatchSet& s) {
   return n;
 }
 
-// Seeding/creation variants: no remeshing, then each remesher.
+// Seeding/creation variants: no remeshing, then each remesher, then the
+// tangent-plane resampling (falling back to the fast remesher).
 struct CreateVariant {
   bool remesh;
   Remesher remesher;
   const char* label;
 };
 constexpr CreateVariant kCreateVariants[] = {
-    {false, Remesher::Fast, " (no remesh)"}, {true, Remesher::Cgal, " + cgal remesh"}, {true, Remesher::Fast, " + fast remesh"}};
+    {false, Remesher::Fast, " (no remesh)"}, {true, Remesher::Cgal, " + cgal remesh"}, {true, Remesher::Fast, " + fast remesh"},
+    {true, Remesher::Grid, " + grid"}};
 
 void bench_create(const SurfaceQuery& q, double r, const CreateVariant& variant) {
   PatchOptions po;

@@ -146,9 +146,9 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->group("Patches");
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
-  cmd.add_option("--remesher", o.patch.remesher, "Remesher of new patches: fast (plain arrays) or cgal (same algorithm)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}).description(""))
-      ->type_name("fast|cgal")
+  cmd.add_option("--remesher", o.patch.remesher, "Isotropic patches: fast or cgal (remeshing, same algorithm), grid (tangent-plane lattice, fast where not a height field)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}, {"grid", Remesher::Grid}}).description(""))
+      ->type_name("fast|cgal|grid")
       ->group("Patches");
   cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
       ->capture_default_str()

@@ -181,9 +181,9 @@ void add_patches_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--remesh,!--no-remesh", c->remesh, "Isotropic remeshing of each new patch (target edge r/6)")
       ->capture_default_str();
-  cmd->add_option("--remesher", c->remesher, "Remesher of new patches: fast (plain arrays) or cgal (same algorithm)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}}).description(""))
-      ->type_name("fast|cgal");
+  cmd->add_option("--remesher", c->remesher, "Isotropic patches: fast or cgal (remeshing, same algorithm), grid (tangent-plane lattice, fast where not a height field)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}, {"grid", Remesher::Grid}}).description(""))
+      ->type_name("fast|cgal|grid");
   cmd->add_option("--orientation", c->orientation, "Patch rotation: random, or world:x,y,z to align u with a direction")
       ->capture_default_str();
   add_global_options(*cmd);

@@ -49,10 +49,13 @@ struct SurfacePoint {
   int triangle = -1;
 };
 
-/// Which isotropic remesher new patches go through (same algorithm).
+/// How new patches are made isotropic. Fast and Cgal are the same remeshing
+/// algorithm; Grid resamples instead where it can (docs/patches.md).
 enum class Remesher {
   Fast,  ///< plain arrays specialised for small disks (patch_remesh.cpp)
   Cgal,  ///< CGAL::Polygon_mesh_processing::isotropic_remeshing
+  Grid,  ///< an equilateral lattice in p's tangent plane lifted onto the fluid
+         ///< (patch_resample.cpp); Fast where the cut is not a height field over that plane
 };
 
 struct PatchOptions {
