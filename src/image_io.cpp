@@ -257,6 +257,7 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
     case ExrCompression::Zip: compression = "zip"; break;
     case ExrCompression::Dwaa: compression = "dwaa"; break;
     case ExrCompression::None: compression = "none"; break;
+    case ExrCompression::Rle: compression = "rle"; break;
   }
   spec.attribute("compression", compression);
   spec.attribute("oiio:ColorSpace", "Linear");

@@ -37,7 +37,7 @@ std::vector<std::string> files_in(const std::string& dir) {
 TEST(ImageIo, ExrHalfRoundTripWithinHalfPrecision) {
   TempDir dir("image");
   const Image img = pattern(13, 7, 4);
-  for (ExrCompression comp : {ExrCompression::Piz, ExrCompression::Zip, ExrCompression::None}) {
+  for (ExrCompression comp : {ExrCompression::Piz, ExrCompression::Zip, ExrCompression::Rle, ExrCompression::None}) {
     const std::string path = dir / "rgba.exr";
     write_exr(path, img, {"R", "G", "B", "A"}, {ExrPixelType::Half, comp});
     const Image back = read_image(path);  // float files: never sRGB-decoded

@@ -69,6 +69,12 @@ BakeOptions base_options(const std::string& out) {
     o.prefetch_read = std::string(io) != "serial";
     o.background_write = std::string(io) == "overlap";
   }
+  // LAPFLOW_BENCH_EXR=rle|zip|none: another EXR compression than the default (piz).
+  if (const char* exr = std::getenv("LAPFLOW_BENCH_EXR")) {
+    const std::string c = exr;
+    o.exr.compression = c == "rle" ? ExrCompression::Rle : c == "zip" ? ExrCompression::Zip
+                        : c == "none" ? ExrCompression::None : ExrCompression::Piz;
+  }
   return o;
 }
 

@@ -50,7 +50,7 @@ void run_bake(BakeCli& c) {
   o.exr.type = c.exr_type == "float" ? ExrPixelType::Float : ExrPixelType::Half;
   static const std::map<std::string, ExrCompression> compressions{
       {"piz", ExrCompression::Piz}, {"zip", ExrCompression::Zip}, {"dwaa", ExrCompression::Dwaa},
-      {"none", ExrCompression::None}};
+      {"none", ExrCompression::None}, {"rle", ExrCompression::Rle}};
   o.exr.compression = compressions.at(c.compression);
   o.raster.mode = parse_raster_mode(c.mode);
   bake_with_progress(o);
@@ -133,8 +133,10 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->check(CLI::IsMember({"half", "float"}))
       ->capture_default_str()
       ->group("Output");
-  cmd.add_option("--compression", c.compression, "EXR compression")
-      ->check(CLI::IsMember({"piz", "zip", "dwaa", "none"}))
+  cmd.add_option("--compression", c.compression,
+                 "EXR compression: piz (lossless), zip (lossless, smaller on smooth textures, slower), rle (lossless, "
+                 "fastest, larger), dwaa (lossy), none")
+      ->check(CLI::IsMember({"piz", "zip", "rle", "dwaa", "none"}))
       ->capture_default_str()
       ->group("Output");
   cmd.add_option("--radius", o.patch.radius,

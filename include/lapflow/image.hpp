@@ -36,7 +36,11 @@ Image resize_image(const Image& img, int width, int height);
 void sample_bilinear(const Image& img, double u, double v, float* out);
 
 enum class ExrPixelType { Half, Float };
-enum class ExrCompression { Piz, Zip, Dwaa, None };
+/// Piz: lossless wavelet + Huffman (the default). Zip: lossless zlib, smaller
+/// on smooth images and slower. Rle: lossless run lengths, about 5x cheaper
+/// to write than Piz and barely larger on noisy textures (pebbles at 6144^2:
+/// 142 MB against 130 MB), much larger on smooth ones. Dwaa: lossy.
+enum class ExrCompression { Piz, Zip, Dwaa, None, Rle };
 struct ExrOptions {
   ExrPixelType type = ExrPixelType::Half;
   ExrCompression compression = ExrCompression::Piz;
