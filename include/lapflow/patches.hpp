@@ -54,8 +54,9 @@ struct SurfacePoint {
 enum class Remesher {
   Fast,  ///< plain arrays specialised for small disks (patch_remesh.cpp)
   Cgal,  ///< CGAL::Polygon_mesh_processing::isotropic_remeshing
-  Grid,  ///< an equilateral lattice in p's tangent plane lifted onto the fluid
-         ///< (patch_resample.cpp); Fast where the cut is not a height field over that plane
+  Grid,  ///< an equilateral lattice (edge 0.8 remesh_edge r, the remesher's mean edge) in
+         ///< p's tangent plane lifted onto the fluid (patch_resample.cpp); Fast where the
+         ///< cut is not a height field over that plane
 };
 
 struct PatchOptions {
