@@ -18,6 +18,7 @@
 // is written and the caller remeshes instead.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include "lapflow/surface_query.hpp"
@@ -281,10 +282,34 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
   const double predicted = M_PI * r * r / (0.25 * std::sqrt(3.0) * L * L);
   if (double(queue.size()) < 0.25 * predicted) return GridResult::TooFew;
 
-  // Output in lattice order. Each vertex gets one more closest-point query
-  // from its lifted position with a tiny radius (create_patch's snap does the
-  // same): advection projects from there next frame and on a shared edge may
-  // pick the neighbouring triangle; taking it now keeps a still scene still.
+  // Output in lattice order. Stillness (create_patch's snap): a vertex must
+  // be where advection's projection from it lands next frame, on the triangle
+  // it picks, or a still scene would not bake identical atlases. A lifted
+  // point well inside its fluid triangle (farther than 1e-9 r from its edges)
+  // projects to itself, bit for bit (SurfaceQuery::closest returns the query
+  // point when it is within rounding of the nearest triangle), on that
+  // triangle: every other triangle is farther unless the surface intersects
+  // itself there. Near an edge or a vertex the neighbouring triangle may win
+  // the tie: one closest-point query with a tiny radius settles it, as the
+  // snap does. (The test checks the result is idempotent.)
+  auto still = [&](const LatticePoint& lp, Vec3& at, int32_t& triangle) {
+    const Tri& f = cut.triangles[lp.triangle];
+    const Vec3 &A = cut.positions[f[0]], &B = cut.positions[f[1]], &C = cut.positions[f[2]];
+    const double longest = std::sqrt(std::max({norm2(B - A), norm2(C - B), norm2(A - C)}));
+    if (lp.depth * norm(cross(B - A, C - A)) > 1e-9 * r * longest) {
+      double scale = std::max({std::fabs(lp.lifted.x), std::fabs(lp.lifted.y), std::fabs(lp.lifted.z)});
+      for (const Vec3* v : {&A, &B, &C}) scale = std::max({scale, std::fabs(v->x), std::fabs(v->y), std::fabs(v->z)});
+      const TrianglePoint q = closest_point_on_triangle(lp.lifted, A, B, C);
+      if (norm(q.point - lp.lifted) <= 16 * std::numeric_limits<double>::epsilon() * scale) {
+        at = lp.lifted;
+        triangle = cut_triangles[lp.triangle];
+        return;
+      }
+    }
+    const ClosestHit hit = surface.closest(lp.lifted, 1e-6 * r);
+    at = hit.found ? hit.point : lp.lifted;
+    triangle = hit.found ? hit.triangle : cut_triangles[lp.triangle];
+  };
   out.positions.clear();
   out.triangles.clear();
   under.clear();
@@ -297,9 +322,11 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
       LatticePoint& lp = lattice[v[k]];
       if (lp.vertex < 0) {
         lp.vertex = int32_t(out.positions.size());
-        const ClosestHit hit = surface.closest(lp.lifted, 1e-6 * r);
-        out.positions.push_back(hit.found ? hit.point : lp.lifted);
-        under.push_back(hit.found ? hit.triangle : cut_triangles[lp.triangle]);
+        Vec3 at;
+        int32_t triangle;
+        still(lp, at, triangle);
+        out.positions.push_back(at);
+        under.push_back(triangle);
       }
       f[k] = lp.vertex;
     }

@@ -68,6 +68,12 @@ void expect_good_patch(const SurfaceQuery& surface, const Patch& p, double r, do
     const TrianglePoint q = closest_point_on_triangle(p.positions[v], surface.mesh().positions[f[0]],
                                                       surface.mesh().positions[f[1]], surface.mesh().positions[f[2]]);
     EXPECT_LT(norm(q.point - p.positions[v]), 1e-9 * r);
+    // Still: projecting it again (what advection does next frame) lands on
+    // the same point, bit for bit, on the same triangle.
+    const ClosestHit again = surface.closest(p.positions[v], 1e-6 * r);
+    ASSERT_TRUE(again.found);
+    EXPECT_EQ(again.point, p.positions[v]);
+    EXPECT_EQ(again.triangle, p.surface_triangle[v]);
     EXPECT_LE(norm(p.positions[v] - c), r + 1.2 * kLatticeEdge * r);
   }
   double worst_inside = 180;

@@ -23,7 +23,7 @@ struct PatchesCommand {
   std::string mesh_pattern, frames, out_dir, name, vdb_pattern, grid_name, orientation = "random";
   double radius = 0, fps = 24, min_speed = 0, spacing = 1, delta_max = 3;
   bool remesh = true;
-  Remesher remesher = Remesher::Fast;
+  Remesher remesher = PatchOptions{}.remesher;
 };
 
 // One frame's surface with what samples velocity on it (all owned here so the
