@@ -251,7 +251,7 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
   spec.alpha_channel = -1;
   for (int c = 0; c < img.channels; ++c)
     if (channel_names[c] == "A") spec.alpha_channel = c;
-  const char* compression = "piz";
+  const char* compression = "rle";
   switch (options.compression) {
     case ExrCompression::Piz: compression = "piz"; break;
     case ExrCompression::Zip: compression = "zip"; break;

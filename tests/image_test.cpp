@@ -4,6 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -46,6 +49,48 @@ TEST(ImageIo, ExrHalfRoundTripWithinHalfPrecision) {
     ASSERT_EQ(back.channels, 4);
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
       EXPECT_NEAR(back.pixels[i], img.pixels[i], std::abs(img.pixels[i]) * 1e-3 + 1e-4) << "index " << i;
+  }
+}
+
+/// The compression attribute of an EXR file's header (OpenEXR file layout:
+/// magic, version, then name\0 type\0 int32 size, value... until an empty
+/// name). -1 when absent. 0 none, 1 RLE, 2 ZIPS, 3 ZIP, 4 PIZ, 8 DWAA.
+int exr_header_compression(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::size_t at = 8;
+  auto cstring = [&] {
+    std::string out;
+    while (at < bytes.size() && bytes[at] != 0) out += bytes[at++];
+    ++at;
+    return out;
+  };
+  while (at < bytes.size()) {
+    const std::string name = cstring();
+    if (name.empty()) break;
+    const std::string type = cstring();
+    if (at + 4 > bytes.size()) break;
+    int32_t size;
+    std::memcpy(&size, &bytes[at], 4);
+    at += 4;
+    if (name == "compression" && type == "compression" && size == 1 && at < bytes.size())
+      return int(static_cast<unsigned char>(bytes[at]));
+    at += std::size_t(size);
+  }
+  return -1;
+}
+
+TEST(ImageIo, ExrCompressionIsTheOneAskedForAndRleByDefault) {
+  // The default (README, --compression) is RLE; each option must reach the file.
+  TempDir dir("image");
+  const Image img = pattern(64, 32, 4);
+  write_exr(dir / "default.exr", img, {"R", "G", "B", "A"});
+  EXPECT_EQ(exr_header_compression(dir / "default.exr"), 1);
+  const std::pair<ExrCompression, int> cases[] = {
+      {ExrCompression::None, 0}, {ExrCompression::Rle, 1}, {ExrCompression::Zip, 3}, {ExrCompression::Piz, 4}};
+  for (const auto& [comp, code] : cases) {
+    write_exr(dir / "c.exr", img, {"R", "G", "B", "A"}, {ExrPixelType::Half, comp});
+    EXPECT_EQ(exr_header_compression(dir / "c.exr"), code) << code;
   }
 }
 

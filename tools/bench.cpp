@@ -69,11 +69,11 @@ BakeOptions base_options(const std::string& out) {
     o.prefetch_read = std::string(io) != "serial";
     o.background_write = std::string(io) == "overlap";
   }
-  // LAPFLOW_BENCH_EXR=rle|zip|none: another EXR compression than the default (piz).
+  // LAPFLOW_BENCH_EXR=piz|zip|none: another EXR compression than the default (rle).
   if (const char* exr = std::getenv("LAPFLOW_BENCH_EXR")) {
     const std::string c = exr;
-    o.exr.compression = c == "rle" ? ExrCompression::Rle : c == "zip" ? ExrCompression::Zip
-                        : c == "none" ? ExrCompression::None : ExrCompression::Piz;
+    o.exr.compression = c == "piz" ? ExrCompression::Piz : c == "zip" ? ExrCompression::Zip
+                        : c == "none" ? ExrCompression::None : ExrCompression::Rle;
   }
   return o;
 }
