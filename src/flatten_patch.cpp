@@ -352,6 +352,24 @@ int farthest_from(const PatchMesh& m, const std::vector<int>& candidates, const 
   return best;
 }
 
+// A triangle in its own plane: q[0] = 0, q[1] on +x, q[2] above; d = twice
+// its area. False (nothing to ask of the map) when it is degenerate. Every
+// LSCM path uses this one computation: on a triangle whose area is rounding
+// noise, q[2].y = dot(e2, Y) is not d / l1, and the map depends on which one
+// is used.
+bool local_frame(const PatchMesh& mesh, const Tri& t, Vec2 q[3], double& d) {
+  const Vec3 e1 = mesh.positions[t[1]] - mesh.positions[t[0]], e2 = mesh.positions[t[2]] - mesh.positions[t[0]];
+  const Vec3 n = cross(e1, e2);
+  d = norm(n);
+  const double l1 = norm(e1);
+  if (!(d > 1e-300) || !(l1 > 0)) return false;
+  const Vec3 X = e1 / l1, Y = cross(n / d, X);
+  q[0] = {0, 0};
+  q[1] = {l1, 0};
+  q[2] = {dot(e2, X), dot(e2, Y)};
+  return true;
+}
+
 }  // namespace
 
 bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int pin_b, Vec2 uv_a, Vec2 uv_b) {
@@ -390,18 +408,10 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
   std::vector<double> diag(nv, 0.0), rhs_re(nv, 0.0), rhs_im(nv, 0.0);
   int used = 0;
   for (const Tri& t : mesh.triangles) {
-    const Vec3 &p0 = mesh.positions[t[0]], &p1 = mesh.positions[t[1]], &p2 = mesh.positions[t[2]];
-    const Vec3 e1 = p1 - p0, e2 = p2 - p0;
-    const Vec3 n = cross(e1, e2);
-    const double d = norm(n);  // twice the area
-    const double l1 = norm(e1);
-    if (!(d > 1e-300) || !(l1 > 0)) continue;  // degenerate: no conformality to ask for
+    Vec2 q[3];
+    double d;  // twice the area
+    if (!local_frame(mesh, t, q, d)) continue;  // degenerate: no conformality to ask for
     ++used;
-    // The reference's local frame, operation for operation: on a triangle
-    // whose area is rounding noise, q2.y = dot(e2, Y) is not d / l1, and
-    // the map depends on which one is used.
-    const Vec3 X = e1 / l1, Y = cross(n / d, X);
-    const Vec2 q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
     const double w = 1.0 / std::sqrt(2 * d);
     // c_j = i w (q_{j+2} - q_{j+1}); fixed = sum over pinned corners of c_j z_j.
     double c_re[3], c_im[3], fixed_re = 0, fixed_im = 0;
@@ -500,15 +510,11 @@ bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pi
   const Complex z_a(uv_a.x, uv_a.y), z_b(uv_b.x, uv_b.y);
   int used = 0;
   for (const Tri& t : mesh.triangles) {
-    const Vec3 &p0 = mesh.positions[t[0]], &p1 = mesh.positions[t[1]], &p2 = mesh.positions[t[2]];
-    const Vec3 e1 = p1 - p0, e2 = p2 - p0;
-    const Vec3 n = cross(e1, e2);
-    const double d = norm(n);  // twice the area
-    const double l1 = norm(e1);
-    if (!(d > 1e-300) || !(l1 > 0)) continue;  // degenerate: no conformality to ask for
+    Vec2 f[3];
+    double d;  // twice the area
+    if (!local_frame(mesh, t, f, d)) continue;  // degenerate: no conformality to ask for
     ++used;
-    const Vec3 X = e1 / l1, Y = cross(n / d, X);
-    const Complex q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
+    const Complex q[3] = {{f[0].x, f[0].y}, {f[1].x, f[1].y}, {f[2].x, f[2].y}};
     const Complex w(0, 1.0 / std::sqrt(2 * d));
     Complex c[3], fixed = 0;
     for (int j = 0; j < 3; ++j) {
@@ -551,12 +557,9 @@ bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pi
 double lscm_energy(const PatchMesh& mesh, const std::vector<Vec2>& uv) {
   double energy = 0;
   for (const Tri& t : mesh.triangles) {
-    const Vec3 e1 = mesh.positions[t[1]] - mesh.positions[t[0]], e2 = mesh.positions[t[2]] - mesh.positions[t[0]];
-    const Vec3 n = cross(e1, e2);
-    const double d = norm(n), l1 = norm(e1);
-    if (!(d > 1e-300) || !(l1 > 0)) continue;
-    const Vec3 X = e1 / l1, Y = cross(n / d, X);
-    const Vec2 q[3] = {{0, 0}, {l1, 0}, {dot(e2, X), dot(e2, Y)}};
+    Vec2 q[3];
+    double d;
+    if (!local_frame(mesh, t, q, d)) continue;
     double r1 = 0, r2 = 0;
     for (int j = 0; j < 3; ++j) {
       const Vec2 e = q[(j + 2) % 3] - q[(j + 1) % 3];

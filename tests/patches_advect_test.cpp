@@ -150,16 +150,7 @@ TEST(PatchesAdvect, SameResultForOneAndTwoThreads) {
   set_thread_count(2);
   const RigidRun two = run_rigid(3, po);
   set_thread_count(0);
-  ASSERT_EQ(one.patches.patches.size(), two.patches.patches.size());
-  for (std::size_t i = 0; i < one.patches.patches.size(); ++i) {
-    const Patch &a = one.patches.patches[i], &b = two.patches.patches[i];
-    EXPECT_EQ(a.id, b.id);
-    EXPECT_EQ(a.positions, b.positions);
-    EXPECT_EQ(a.rest_uv, b.rest_uv);
-    EXPECT_EQ(a.triangles, b.triangles);
-    EXPECT_EQ(a.weight, b.weight);
-    EXPECT_EQ(a.surface_triangle, b.surface_triangle);
-  }
+  test::expect_same_patches(one.patches, two.patches);
 }
 
 TEST(PatchesAdvect, SimpleShearMatchesTheAnalyticDistortion) {

@@ -17,6 +17,7 @@
 #include "lapflow/patches.hpp"
 #include "lapflow/surface_query.hpp"
 #include "patch_internal.hpp"
+#include "test_helpers.hpp"
 
 namespace lapflow {
 namespace {
@@ -250,24 +251,11 @@ TEST(PatchesRemesh, CreatedPatchLiesOnTheSurfaceForAnyThreadCount) {
   PatchOptions o;
   o.radius = 0.12;
   o.remesher = Remesher::Fast;
-  PatchSet one, two;
-  set_thread_count(1);
-  seed_patches(surface, 0, o, {}, {}, one);
-  set_thread_count(2);
-  seed_patches(surface, 0, o, {}, {}, two);
-  set_thread_count(0);
+  const PatchSet one = test::seed_on_threads(surface, o, 1), two = test::seed_on_threads(surface, o, 2);
   ASSERT_GT(one.patches.size(), 20u);
-  ASSERT_EQ(one.patches.size(), two.patches.size());
-  for (std::size_t i = 0; i < one.patches.size(); ++i) {
-    const Patch &p = one.patches[i], &q = two.patches[i];
-    ASSERT_EQ(p.triangles, q.triangles);
-    ASSERT_EQ(p.positions.size(), q.positions.size());
+  test::expect_same_patches(one, two);
+  for (const Patch& p : one.patches) {
     for (std::size_t v = 0; v < p.positions.size(); ++v) {
-      ASSERT_EQ(p.positions[v].x, q.positions[v].x);
-      ASSERT_EQ(p.positions[v].y, q.positions[v].y);
-      ASSERT_EQ(p.positions[v].z, q.positions[v].z);
-      ASSERT_EQ(p.rest_uv[v].x, q.rest_uv[v].x);
-      ASSERT_EQ(p.rest_uv[v].y, q.rest_uv[v].y);
       // Snapped onto the fluid, with the triangle under it known.
       const ClosestHit hit = surface.closest(p.positions[v], o.radius);
       ASSERT_TRUE(hit.found);

@@ -264,24 +264,9 @@ TEST(PatchesResample, SamePatchesForOneAndTwoThreads) {
   PatchOptions o;
   o.radius = 0.2;
   o.remesher = Remesher::Grid;
-  PatchSet one, two;
-  set_thread_count(1);
-  seed_patches(surface, 0, o, {}, {}, one);
-  set_thread_count(2);
-  seed_patches(surface, 0, o, {}, {}, two);
-  set_thread_count(0);
+  const PatchSet one = test::seed_on_threads(surface, o, 1), two = test::seed_on_threads(surface, o, 2);
   ASSERT_GT(one.patches.size(), 50u);
-  ASSERT_EQ(one.patches.size(), two.patches.size());
-  for (std::size_t i = 0; i < one.patches.size(); ++i) {
-    const Patch &p = one.patches[i], &q = two.patches[i];
-    ASSERT_EQ(p.triangles, q.triangles);
-    ASSERT_EQ(p.surface_triangle, q.surface_triangle);
-    ASSERT_EQ(p.positions.size(), q.positions.size());
-    for (std::size_t v = 0; v < p.positions.size(); ++v) {
-      ASSERT_EQ(p.positions[v], q.positions[v]);
-      ASSERT_EQ(p.rest_uv[v], q.rest_uv[v]);
-    }
-  }
+  test::expect_same_patches(one, two);
 }
 
 }  // namespace

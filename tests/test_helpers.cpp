@@ -1,8 +1,13 @@
 #include "test_helpers.hpp"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <string>
+
+#include "lapflow/parallel.hpp"
 
 namespace lapflow::test {
 
@@ -54,6 +59,28 @@ TriMesh plane_grid(int nx, int ny, double size_x, double size_y, double z) {
 Vec3 rotate(const Vec3& v, const Vec3& axis, double angle) {
   const double c = std::cos(angle), s = std::sin(angle);
   return v * c + cross(axis, v) * s + axis * (dot(axis, v) * (1 - c));
+}
+
+PatchSet seed_on_threads(const SurfaceQuery& surface, const PatchOptions& options, int threads) {
+  PatchSet set;
+  set_thread_count(threads);
+  seed_patches(surface, 0, options, {}, {}, set);
+  set_thread_count(0);
+  return set;
+}
+
+void expect_same_patches(const PatchSet& a, const PatchSet& b) {
+  ASSERT_EQ(a.patches.size(), b.patches.size());
+  for (std::size_t i = 0; i < a.patches.size(); ++i) {
+    const Patch &p = a.patches[i], &q = b.patches[i];
+    SCOPED_TRACE("patch " + std::to_string(i));
+    EXPECT_EQ(p.id, q.id);
+    EXPECT_EQ(p.positions, q.positions);
+    EXPECT_EQ(p.rest_uv, q.rest_uv);
+    EXPECT_EQ(p.triangles, q.triangles);
+    EXPECT_EQ(p.weight, q.weight);
+    EXPECT_EQ(p.surface_triangle, q.surface_triangle);
+  }
 }
 
 }  // namespace lapflow::test
