@@ -297,10 +297,8 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
     const Vec3 &A = cut.positions[f[0]], &B = cut.positions[f[1]], &C = cut.positions[f[2]];
     const double longest = std::sqrt(std::max({norm2(B - A), norm2(C - B), norm2(A - C)}));
     if (lp.depth * norm(cross(B - A, C - A)) > 1e-9 * r * longest) {
-      double scale = std::max({std::fabs(lp.lifted.x), std::fabs(lp.lifted.y), std::fabs(lp.lifted.z)});
-      for (const Vec3* v : {&A, &B, &C}) scale = std::max({scale, std::fabs(v->x), std::fabs(v->y), std::fabs(v->z)});
       const TrianglePoint q = closest_point_on_triangle(lp.lifted, A, B, C);
-      if (norm(q.point - lp.lifted) <= 16 * std::numeric_limits<double>::epsilon() * scale) {
+      if (within_rounding_of_triangle(lp.lifted, q.point, A, B, C)) {
         at = lp.lifted;
         triangle = cut_triangles[lp.triangle];
         return;

@@ -177,6 +177,12 @@ SurfaceQuery::SurfaceQuery(const TriMesh& mesh) : mesh_(mesh), impl_(std::make_u
 
 SurfaceQuery::~SurfaceQuery() = default;
 
+bool within_rounding_of_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
+  double scale = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+  for (const Vec3* v : {&a, &b, &c}) scale = std::max({scale, std::abs(v->x), std::abs(v->y), std::abs(v->z)});
+  return norm(q - p) <= 16 * std::numeric_limits<double>::epsilon() * scale;
+}
+
 ClosestHit SurfaceQuery::closest(const Vec3& p, double max_distance) const {
   QueryState state{impl_->records.data(), p, {}, std::numeric_limits<double>::infinity()};
   if (!impl_->scene || !is_finite(p)) return state.best;
@@ -197,12 +203,8 @@ ClosestHit SurfaceQuery::closest(const Vec3& p, double max_distance) const {
   // a still scene would not bake to identical atlases.
   if (state.best.found) {
     const Tri& f = mesh_.triangles[state.best.triangle];
-    double scale = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& v = mesh_.positions[f[k]];
-      scale = std::max({scale, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
-    }
-    if (state.best.distance <= 16 * std::numeric_limits<double>::epsilon() * scale) {
+    if (within_rounding_of_triangle(p, state.best.point, mesh_.positions[f[0]], mesh_.positions[f[1]],
+                                    mesh_.positions[f[2]])) {
       state.best.point = p;
       state.best.distance = 0;
     }

@@ -13,6 +13,7 @@
 #include "lapflow/atlas.hpp"
 #include "lapflow/mesh_io.hpp"
 #include "lapflow/parallel.hpp"
+#include "io_test_helpers.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {
@@ -441,11 +442,7 @@ TEST(SurfaceAtlas, EmptyMeshGivesAnEmptyAtlas) {
   EXPECT_EQ(a.texels.size(), 0u);
 }
 
-std::string dam_break_frame(int frame) {
-  char name[64];
-  std::snprintf(name, sizeof name, "/dam_break/dam_break.%04d.ply", frame);
-  return std::string(LAPFLOW_SOURCE_DIR "/../shared/data") + name;
-}
+using test::dam_break_frame;
 
 TEST(SurfaceAtlas, DamBreakFramesHoldTheBounds) {
   if (!std::filesystem::exists(dam_break_frame(1))) GTEST_SKIP() << "../shared/data/dam_break is absent";

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdio>
 #include <cstring>
 #include <cstdlib>
 #include <filesystem>
@@ -77,6 +78,13 @@ inline int run_command(const std::string& cmd, std::string* out, std::string* er
 inline std::string shared_data_dir() {
   const std::string dir = LAPFLOW_SOURCE_DIR "/../shared/data";
   return std::filesystem::is_directory(dir + "/dam_break") ? dir : std::string();
+}
+
+/// ../shared/data/dam_break/dam_break.NNNN.ply (it may be absent).
+inline std::string dam_break_frame(int frame) {
+  char name[64];
+  std::snprintf(name, sizeof name, "/dam_break/dam_break.%04d.ply", frame);
+  return std::string(LAPFLOW_SOURCE_DIR "/../shared/data") + name;
 }
 
 /// A small bake of `meshes_dir`/m.%04d.ply into `out_dir` with the shipped

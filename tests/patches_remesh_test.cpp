@@ -17,6 +17,7 @@
 #include "lapflow/patches.hpp"
 #include "lapflow/surface_query.hpp"
 #include "patch_internal.hpp"
+#include "io_test_helpers.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {
@@ -28,7 +29,7 @@ using detail::PatchMesh;
 // 0.47 cell toward a neighbour along x or y: edges of 0.06 cell and
 // triangles with angles under a degree, as marching cubes makes.
 TriMesh sliver_grid(int n) {
-  TriMesh m;
+  TriMesh m = test::plane_grid(n, n, 1.0, 1.0);  // vertex (i, j) is j * (n + 1) + i
   const double h = 1.0 / n;
   for (int j = 0; j <= n; ++j)
     for (int i = 0; i <= n; ++i) {
@@ -36,13 +37,7 @@ TriMesh sliver_grid(int n) {
       const uint64_t k = hash64(uint64_t(i), uint64_t(j), 77) % 3;
       if (i < n && j > 0 && j < n && k == 1) x += 0.47 * h;
       if (j < n && i > 0 && i < n && k == 2) y += 0.47 * h;
-      m.positions.push_back({x, y, 0.15 * std::sin(3 * x) * std::cos(2 * y)});
-    }
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) {
-      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
-      m.triangles.push_back({a, b, d});
-      m.triangles.push_back({a, d, c});
+      m.positions[std::size_t(j) * (n + 1) + i] = {x, y, 0.15 * std::sin(3 * x) * std::cos(2 * y)};
     }
   return m;
 }
@@ -215,11 +210,7 @@ TEST(PatchesRemesh, RejectsNonManifoldInput) {
   EXPECT_EQ(m.triangles, before.triangles);
 }
 
-std::string dam_break_frame(int f) {
-  char name[64];
-  std::snprintf(name, sizeof name, "/dam_break/dam_break.%04d.ply", f);
-  return std::string(LAPFLOW_SOURCE_DIR "/../shared/data") + name;
-}
+using test::dam_break_frame;
 
 TEST(PatchesRemesh, DamBreakCutsMatchCgalQuality) {
   if (!std::filesystem::exists(dam_break_frame(9))) GTEST_SKIP() << "../shared/data/dam_break is absent";

@@ -32,6 +32,12 @@ struct RayHit {
   double t = 0, b1 = 0, b2 = 0;
 };
 
+/// True when p is within rounding of its closest point `q` on triangle
+/// (a, b, c): 16 ulps of the largest coordinate involved. SurfaceQuery::closest
+/// then returns p itself, so a point already on the surface projects to itself
+/// bit for bit (what makes a still scene bake identical atlases).
+bool within_rounding_of_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c);
+
 /// Acceleration structure over one TriMesh. The mesh must outlive the query.
 /// Thread-safe for concurrent queries once built.
 class SurfaceQuery {
