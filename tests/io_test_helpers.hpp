@@ -14,8 +14,8 @@
 #include <sstream>
 #include <string>
 
-#include "lapflow/mesh.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/bake/bake.hpp"
 
 namespace lapflow::test {
 

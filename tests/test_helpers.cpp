@@ -7,7 +7,7 @@
 #include <map>
 #include <string>
 
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::test {
 

@@ -1,8 +1,8 @@
 #pragma once
 
 // ---- meshes built in code (patches tests; usable by anyone) ----------------
-#include "lapflow/mesh.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/patches/patches.hpp"
 
 namespace lapflow::test {
 /// Icosphere of `subdivisions` levels (20 * 4^s triangles), outward CCW.

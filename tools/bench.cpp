@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "bench.hpp"
-#include "lapflow/demo_scene.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/bake/bake.hpp"
 
 namespace fs = std::filesystem;
 using namespace lapflow;

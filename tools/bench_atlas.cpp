@@ -9,9 +9,9 @@
 #include <map>
 
 #include "bench.hpp"
-#include "lapflow/atlas.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::bench {
 namespace {

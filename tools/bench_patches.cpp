@@ -11,12 +11,12 @@
 #include <memory>
 
 #include "bench.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/pipeline.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow::bench {
 namespace {
@@ -73,8 +73,8 @@ struct CreateVariant {
   const char* label;
 };
 constexpr CreateVariant kCreateVariants[] = {
-    {false, Remesher::Fast, " (no remesh)"}, {true, Remesher::Cgal, " + cgal remesh"}, {true, Remesher::Fast, " + fast remesh"},
-    {true, Remesher::Grid, " + grid"}};
+    {false, Remesher::Isotropic, " (no remesh)"}, {true, Remesher::CgalIsotropic, " + cgal remesh"}, {true, Remesher::Isotropic, " + fast remesh"},
+    {true, Remesher::Lattice, " + grid"}};
 
 void bench_create(const SurfaceQuery& q, double r, const CreateVariant& variant) {
   PatchOptions po;

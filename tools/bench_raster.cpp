@@ -13,8 +13,8 @@
 #include <string>
 
 #include "bench.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/raster.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/raster/raster.hpp"
 
 namespace lapflow::bench {
 namespace {
@@ -227,7 +227,7 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
     // LAPFLOW_BENCH_MODE=blend|advect benchmarks the other raster modes.
     if (const char* m = std::getenv("LAPFLOW_BENCH_MODE"))
       o.mode = std::string(m) == "blend" ? RasterMode::Blend
-                                         : std::string(m) == "advect" ? RasterMode::Advect : RasterMode::Erosion;
+                                         : std::string(m) == "advect" ? RasterMode::NoErosion : RasterMode::Erosion;
     const double cpu0 = cpu_seconds();
     const FrameTextures out =
         rasterize_atlas(P.mesh, P.atlas, rex, o, WeightOptions{}, 0, maker, TriangleLocator{}, patches);

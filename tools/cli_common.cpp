@@ -7,14 +7,28 @@
 #include <filesystem>
 #include <regex>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::cli {
 
 GlobalOptions& globals() {
   static GlobalOptions g;
   return g;
+}
+
+CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher) {
+  using lapflow::Remesher;
+  const std::map<std::string, Remesher> names{{"lattice", Remesher::Lattice}, {"isotropic", Remesher::Isotropic},
+                                              {"cgal", Remesher::CgalIsotropic}, {"grid", Remesher::Lattice},
+                                              {"fast", Remesher::Isotropic}};
+  return cmd
+      .add_option("--remesher", remesher,
+                  "How new patches get even triangles: lattice (tangent-plane lattice, isotropic where the cut is "
+                  "not a height field), isotropic (remeshing), cgal (CGAL's isotropic remeshing, same algorithm); "
+                  "grid and fast are the old names of lattice and isotropic")
+      ->transform(CLI::CheckedTransformer(names).description(""))
+      ->type_name("lattice|isotropic|cgal");
 }
 
 void add_global_options(CLI::App& cmd) {

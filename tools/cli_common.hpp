@@ -9,8 +9,8 @@
 #include <functional>
 #include <string>
 
-#include "lapflow/pipeline.hpp"
-#include "lapflow/vec.hpp"
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/core/vec.hpp"
 
 namespace lapflow::cli {
 
@@ -25,6 +25,10 @@ struct GlobalOptions {
 GlobalOptions& globals();
 /// Adds --threads, --seed and --quiet to a subcommand.
 void add_global_options(CLI::App& cmd);
+
+/// `--remesher lattice|isotropic|cgal` (the old names `grid` and `fast` are
+/// accepted too), shared by bake and patches.
+CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher);
 /// Applies --threads (call at the start of every command's callback).
 void apply_global_options();
 

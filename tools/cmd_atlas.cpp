@@ -7,12 +7,12 @@
 #include <memory>
 
 #include "cli_common.hpp"
-#include "lapflow/atlas.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/uv_mesh.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/io/uv_mesh.hpp"
 
 namespace lapflow::cli {
 namespace {

@@ -4,9 +4,9 @@
 #include <map>
 
 #include "cli_common.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/bake.hpp"
 
 namespace lapflow::cli {
 
@@ -148,9 +148,7 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->group("Patches");
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
-  cmd.add_option("--remesher", o.patch.remesher, "Isotropic patches: fast or cgal (remeshing, same algorithm), grid (tangent-plane lattice, fast where not a height field)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}, {"grid", Remesher::Grid}}).description(""))
-      ->type_name("fast|cgal|grid")
+  add_remesher_option(cmd, o.patch.remesher)
       ->group("Patches");
   cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
       ->capture_default_str()

@@ -5,8 +5,8 @@
 #include <filesystem>
 
 #include "cli_common.hpp"
-#include "lapflow/demo_scene.hpp"
-#include "lapflow/errors.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow::cli {
 namespace {

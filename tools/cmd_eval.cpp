@@ -2,10 +2,10 @@
 #include <filesystem>
 
 #include "cli_common.hpp"
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/eval.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/addons/eval.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::cli {
 

@@ -5,9 +5,9 @@
 #include <filesystem>
 
 #include "cli_common.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/feature_map.hpp"
-#include "lapflow/image.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/addons/feature_map.hpp"
+#include "lapflow/io/image.hpp"
 
 namespace lapflow::cli {
 namespace {

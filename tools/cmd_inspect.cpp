@@ -9,10 +9,10 @@
 #include <optional>
 
 #include "cli_common.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow::cli {
 namespace {
@@ -94,12 +94,6 @@ void inspect_frame(const InspectOptions& o, const FramePattern& mesh_pattern, co
 }
 
 const SpeedStats& used_speed(const FrameResult& r) { return r.grid_speed.present ? r.grid_speed : r.vertex_speed; }
-
-std::string velocity_source(const FrameResult& r) {
-  if (r.grid_speed.present) return "VDB grid '" + r.grid_name + "'";
-  if (r.vertex_speed.present) return "vertex";
-  return "none";
-}
 
 /// "3, 7-9, 12"
 std::string frame_list(const std::vector<int>& frames) {

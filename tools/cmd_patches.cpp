@@ -10,11 +10,11 @@
 #include <optional>
 
 #include "cli_common.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow::cli {
 namespace {
@@ -181,9 +181,7 @@ void add_patches_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--remesh,!--no-remesh", c->remesh, "Isotropic remeshing of each new patch (target edge r/6)")
       ->capture_default_str();
-  cmd->add_option("--remesher", c->remesher, "Isotropic patches: fast or cgal (remeshing, same algorithm), grid (tangent-plane lattice, fast where not a height field)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, Remesher>{{"fast", Remesher::Fast}, {"cgal", Remesher::Cgal}, {"grid", Remesher::Grid}}).description(""))
-      ->type_name("fast|cgal|grid");
+  add_remesher_option(*cmd, c->remesher);
   cmd->add_option("--orientation", c->orientation, "Patch rotation: random, or world:x,y,z to align u with a direction")
       ->capture_default_str();
   add_global_options(*cmd);

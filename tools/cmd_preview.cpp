@@ -7,10 +7,10 @@
 #include <sstream>
 
 #include "cli_common.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/preview.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/addons/preview.hpp"
 
 namespace lapflow::cli {
 namespace {

@@ -9,8 +9,8 @@
 
 #include "cli_common.hpp"
 #include "scene_file.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/bake/bake.hpp"
 
 int main(int argc, char** argv) {
   using namespace lapflow;

@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/image.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace {
 using lapflow::Image;

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 
-#include "lapflow/errors.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow::cli {
 namespace fs = std::filesystem;

@@ -11,7 +11,7 @@
 // no time interpolation) at the voxels near the surface, and mesh the zero
 // set of phi(x) = distance-like function of the start shape at X0(x). Because
 // tau(T) = 0 exactly, the frame at t = T is the start shape again.
-#include "lapflow/demo_scene.hpp"
+#include "lapflow/addons/demo_scene.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -30,9 +30,9 @@
 #include <stdexcept>
 #include <vector>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

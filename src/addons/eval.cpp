@@ -7,7 +7,7 @@
 // the previous frame's and this one's. Every reduction runs over fixed chunks
 // of texels summed in chunk order, so results do not depend on the thread
 // count.
-#include "lapflow/eval.hpp"
+#include "lapflow/addons/eval.hpp"
 
 #include <fmt/format.h>
 #include <sys/wait.h>
@@ -26,15 +26,15 @@
 #include <numeric>
 #include <sstream>
 
-#include "atlas_internal.hpp"
-#include "lapflow/atlas.hpp"
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/velocity.hpp"
+#include "atlas/internal.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

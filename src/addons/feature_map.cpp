@@ -2,15 +2,15 @@
 // Plain separable image filters over lapflow::Image; every output pixel is
 // written by index from inputs that do not change during the pass, so the
 // result is the same at any thread count.
-#include "lapflow/feature_map.hpp"
+#include "lapflow/addons/feature_map.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

@@ -1,7 +1,7 @@
 // `lapflow preview`: reading a bake's frames, framing the camera, putting
 // panels side by side. The renderer is in preview_render.cpp, the labels in
 // preview_label.cpp, the video in preview_video.cpp.
-#include "lapflow/preview.hpp"
+#include "lapflow/addons/preview.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,9 +9,9 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

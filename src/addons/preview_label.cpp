@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 
-#include "lapflow/preview.hpp"
+#include "lapflow/addons/preview.hpp"
 
 namespace lapflow {
 

@@ -10,9 +10,9 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/preview.hpp"
-#include "raster_sampling.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/addons/preview.hpp"
+#include "raster/sampling.hpp"
 
 namespace lapflow {
 namespace {

@@ -11,10 +11,10 @@
 #include <fstream>
 #include <sstream>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/preview.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/addons/preview.hpp"
 
 extern char** environ;
 

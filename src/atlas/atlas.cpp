@@ -4,9 +4,9 @@
 #include <chrono>
 #include <cmath>
 
-#include "atlas_internal.hpp"
-#include "lapflow/atlas.hpp"
-#include "lapflow/errors.hpp"
+#include "atlas/internal.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace {

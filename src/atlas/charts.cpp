@@ -7,8 +7,8 @@
 #include <cmath>
 #include <numbers>
 
-#include "atlas_internal.hpp"
-#include "lapflow/parallel.hpp"
+#include "atlas/internal.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::atlas_detail {
 

@@ -9,8 +9,8 @@
 #include <cmath>
 #include <numeric>
 
-#include "atlas_internal.hpp"
-#include "lapflow/parallel.hpp"
+#include "atlas/internal.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow::atlas_detail {
 namespace {

@@ -1,12 +1,12 @@
 #pragma once
-// Internal pieces of the surface atlas (surface_atlas.cpp orchestrates them):
-// segmentation (atlas_charts.cpp), LSCM (atlas_lscm.cpp), packing and texel
-// map (atlas_pack.cpp). Not a public header.
+// Internal pieces of the surface atlas (atlas.cpp orchestrates them):
+// segmentation (charts.cpp), LSCM (flatten.cpp), packing and texel map
+// (pack.cpp). Not a public header.
 #include <cstdint>
 #include <vector>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/mesh.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow::atlas_detail {
 

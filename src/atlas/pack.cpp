@@ -11,8 +11,8 @@
 #include <numeric>
 #include <vector>
 
-#include "atlas_internal.hpp"
-#include "lapflow/parallel.hpp"
+#include "atlas/internal.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace {
 /// stb_rect_pack sorts with qsort, which leaves equal boxes in an order the C

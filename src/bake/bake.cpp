@@ -1,5 +1,5 @@
 // The bake: one short frame loop over the stages (ALGORITHM.md steps 1-10).
-#include "lapflow/pipeline.hpp"
+#include "lapflow/bake/bake.hpp"
 
 #include <malloc.h>
 #include <sys/resource.h>
@@ -13,14 +13,14 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/uv_mesh.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/io/uv_mesh.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

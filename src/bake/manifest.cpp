@@ -1,5 +1,5 @@
 // NAME.bake.json: the inputs and settings of a bake, for eval and preview.
-#include "lapflow/bake_manifest.hpp"
+#include "lapflow/bake/manifest.hpp"
 
 #include <cstdio>
 #include <filesystem>
@@ -7,8 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/errors.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;
@@ -28,7 +28,7 @@ std::string raster_mode_name(RasterMode mode) {
   switch (mode) {
     case RasterMode::Erosion: return "erosion";
     case RasterMode::Blend: return "blend";
-    case RasterMode::Advect: return "advect";
+    case RasterMode::NoErosion: return "advect";
   }
   return "erosion";
 }
@@ -36,7 +36,7 @@ std::string raster_mode_name(RasterMode mode) {
 RasterMode parse_raster_mode(const std::string& name) {
   if (name == "erosion") return RasterMode::Erosion;
   if (name == "blend") return RasterMode::Blend;
-  if (name == "advect") return RasterMode::Advect;
+  if (name == "advect") return RasterMode::NoErosion;
   throw UsageError("unknown mode '" + name + "' (expected erosion, blend or advect)");
 }
 

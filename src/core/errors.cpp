@@ -1,4 +1,4 @@
-#include "lapflow/errors.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace {

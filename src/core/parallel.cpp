@@ -1,4 +1,4 @@
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/parallel.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>

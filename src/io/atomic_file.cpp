@@ -1,4 +1,4 @@
-#include "lapflow/atomic_file.hpp"
+#include "lapflow/io/atomic_file.hpp"
 
 #include <unistd.h>
 
@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "lapflow/errors.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
 
 namespace lapflow {
 namespace {

@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <regex>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

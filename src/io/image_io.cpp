@@ -12,10 +12,10 @@
 #include <filesystem>
 #include <memory>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

@@ -7,7 +7,7 @@
 // flat arrays, accepts every PLY scalar type and list layout, and every
 // failure names the file, the element and its index. Parsing a 20k-triangle
 // binary frame takes about a millisecond.
-#include "lapflow/mesh_io.hpp"
+#include "lapflow/io/mesh_io.hpp"
 
 #include <bit>
 #include <cerrno>
@@ -19,8 +19,8 @@
 #include <memory>
 #include <string_view>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/errors.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;

@@ -5,9 +5,9 @@
 #include <memory>
 #include <string>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/patches/patches.hpp"
 
 namespace lapflow {
 namespace {

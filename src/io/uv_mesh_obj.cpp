@@ -6,8 +6,8 @@
 #include <numeric>
 #include <stdexcept>
 
-#include "lapflow/atomic_file.hpp"
-#include "lapflow/uv_mesh.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/uv_mesh.hpp"
 
 namespace lapflow {
 

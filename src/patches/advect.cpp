@@ -17,9 +17,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow {
 namespace {

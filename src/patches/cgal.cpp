@@ -10,7 +10,7 @@
 #include <CGAL/Surface_mesh_parameterization/parameterize.h>
 #include <CGAL/boost/graph/helpers.h>
 
-#include "patch_internal.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow::detail {
 namespace {

@@ -7,9 +7,9 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow {
 namespace detail {
@@ -251,7 +251,7 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
   std::vector<Vec2> uv;
   bool flat = false;
   PatchMesh mesh;
-  if (options.remesh && options.remesher == Remesher::Grid) {
+  if (options.remesh && options.remesher == Remesher::Lattice) {
     // Resampling needs the fluid up to one lattice edge beyond r (the
     // triangles within r reach that far); where the cut is no height field
     // over the tangent plane, the fast remesher takes the usual cut below.
@@ -263,10 +263,10 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
     const double edge = kLatticeEdge * options.remesh_edge * r;
     std::vector<int32_t> cut_triangles;
     const PatchMesh wide = cut_patch(fluid, adjacency, seed, at.position, n_p, r + edge, &cut_triangles);
-    trace.grid = detail::grid_resample(surface, wide, cut_triangles, at.position, n_p, r, edge, mesh, under);
-    if (trace.grid == detail::GridResult::Resampled && detail::lscm_flatten(mesh, uv)) {
+    trace.lattice = detail::lattice_resample(surface, wide, cut_triangles, at.position, n_p, r, edge, mesh, under);
+    if (trace.lattice == detail::LatticeResult::Resampled && detail::lscm_flatten(mesh, uv)) {
       flat = true;
-      trace.path = PatchPath::Grid;
+      trace.path = PatchPath::Lattice;
     }
   }
   if (!flat) mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, r);
@@ -280,8 +280,8 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
       area += 0.5 * norm(cross(mesh.positions[f[1]] - mesh.positions[f[0]], mesh.positions[f[2]] - mesh.positions[f[0]]));
     constexpr double kMaxRemeshTriangles = 4000;
     const double edge = std::max(options.remesh_edge * r, std::sqrt(area / (0.433 * kMaxRemeshTriangles)));
-    const bool remeshed_ok = options.remesher == Remesher::Cgal ? detail::cgal_remesh(remeshed, edge)
-                                                                : detail::fast_remesh(remeshed, edge);
+    const bool remeshed_ok = options.remesher == Remesher::CgalIsotropic ? detail::cgal_remesh(remeshed, edge)
+                                                                : detail::isotropic_remesh(remeshed, edge);
     if (remeshed_ok) {
       trim_to_ball(remeshed, at.position, r);
       snap(remeshed);

@@ -3,8 +3,8 @@
 // shared between their translation units and the tests. Not public API.
 #include <vector>
 
-#include "lapflow/patches.hpp"
-#include "lapflow/vec.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/core/vec.hpp"
 
 namespace lapflow::detail {
 
@@ -50,11 +50,12 @@ bool cgal_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
 
 /// The same remeshing (split > 4/3 L, collapse < 4/5 L, flip toward valence 6,
 /// 4 on the border, tangential relaxation; border split, collapsed and relaxed
-/// along itself; no projection) on plain arrays, several times faster on
-/// patch-sized meshes (patch_remesh.cpp). Deterministic. Returns false (mesh
+/// along itself; no projection) on plain arrays, cheaper than CGAL's on
+/// patch-sized meshes since it skips Surface_mesh's bookkeeping
+/// (patches/remesh.cpp; numbers in docs/patches.md). Deterministic. Returns false (mesh
 /// untouched) when the mesh is not an oriented manifold (edges with more than
 /// two triangles or opposite orientations, vertices with several fans).
-bool fast_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
+bool isotropic_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
 
 /// Duplicates every vertex whose incident triangles form several fans
 /// (edge-connected groups around it), so the mesh becomes manifold at vertices.
@@ -67,10 +68,10 @@ void split_nonmanifold_vertices(PatchMesh& mesh);
 double triangle_distortion(const Vec2& u0, const Vec2& u1, const Vec2& u2, const Vec3& p0, const Vec3& p1,
                            const Vec3& p2, double scale, double* s1 = nullptr, double* s2 = nullptr);
 
-// ---- Tangent-plane resampling (patch_resample.cpp) ----
+// ---- Tangent-plane lattice (patches/lattice.cpp) ----
 
-/// What grid_resample did with a cut.
-enum class GridResult {
+/// What lattice_resample did with a cut.
+enum class LatticeResult {
   Resampled,  ///< `out` holds the resampled patch
   Steep,      ///< a cut triangle tilts more than acos(min_cos) from n_p (or faces away): not a height field
   Overlap,    ///< a lattice point lies strictly inside two projected triangles: the cut folds over itself
@@ -86,19 +87,19 @@ enum class GridResult {
 /// piece holding the one nearest p. Every output vertex is on the fluid with
 /// its fluid triangle in `under`; every triangle's normal has a positive dot
 /// with n_p. Anything but Resampled leaves `out` and `under` unspecified.
-GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, const std::vector<int32_t>& cut_triangles,
+LatticeResult lattice_resample(const SurfaceQuery& surface, const PatchMesh& cut, const std::vector<int32_t>& cut_triangles,
                          const Vec3& p, const Vec3& n_p, double r, double edge, PatchMesh& out,
                          std::vector<int32_t>& under, double min_cos = 0.5);
 
 /// How create_patch made a patch's mesh.
 enum class PatchPath {
-  Grid,      ///< grid_resample (Remesher::Grid on a height-field cut)
-  Remeshed,  ///< the cut remeshed (fast or CGAL), trimmed to r and snapped
+  Lattice,   ///< lattice_resample (Remesher::Lattice on a height-field cut)
+  Remeshed,  ///< the cut remeshed (Isotropic or CgalIsotropic), trimmed to r and snapped
   Cut,       ///< the cut itself, snapped (remeshing off or failed)
 };
 struct PatchTrace {
   PatchPath path = PatchPath::Cut;
-  GridResult grid = GridResult::Resampled;  ///< what grid_resample said (when it was tried)
+  LatticeResult lattice = LatticeResult::Resampled;  ///< what lattice_resample said (when it was tried)
 };
 
 /// create_patch, also telling which path it took (for tests and measurements).

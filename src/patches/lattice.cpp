@@ -21,8 +21,8 @@
 #include <limits>
 #include <numeric>
 
-#include "lapflow/surface_query.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow::detail {
 namespace {
@@ -76,7 +76,7 @@ struct Scratch {
 
 }  // namespace
 
-GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, const std::vector<int32_t>& cut_triangles,
+LatticeResult lattice_resample(const SurfaceQuery& surface, const PatchMesh& cut, const std::vector<int32_t>& cut_triangles,
                          const Vec3& p, const Vec3& n_p, double r, double edge, PatchMesh& out,
                          std::vector<int32_t>& under, double min_cos) {
   const Vec3 n = normalized(n_p);
@@ -112,10 +112,10 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
     const Vec3 n3 = cross(B - A, C - A);
     const double area2 = norm(n3);
     if (!(area2 > 1e-12 * r * r)) continue;  // degenerate: covers nothing
-    if (dot(n3, n) < min_cos * area2) return GridResult::Steep;
+    if (dot(n3, n) < min_cos * area2) return LatticeResult::Steep;
     const Vec2 &a = flat[f[0]], &b = flat[f[1]], &c = flat[f[2]];
     const double d = cross(b - a, c - a);
-    if (!(d > 0)) return GridResult::Steep;
+    if (!(d > 0)) return LatticeResult::Steep;
     const double ylo = std::min({a.y, b.y, c.y}), yhi = std::max({a.y, b.y, c.y});
     const double xlo = std::min({a.x, b.x, c.x}), xhi = std::max({a.x, b.x, c.x});
     const int jlo = std::max(-J, int(std::ceil((ylo - tol) / h))), jhi = std::min(J, int(std::floor((yhi + tol) / h)));
@@ -130,7 +130,7 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
         if (depth < -eps) continue;
         LatticePoint& lp = lattice[index(i, j)];
         // Strictly inside two triangles: the projection overlaps itself.
-        if (depth > eps && ++lp.interior > 1) return GridResult::Overlap;
+        if (depth > eps && ++lp.interior > 1) return LatticeResult::Overlap;
         if (depth > lp.depth) lp.depth = depth, lp.triangle = t, lp.b[0] = l0, lp.b[1] = l1, lp.b[2] = l2;
       }
     }
@@ -259,7 +259,7 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
         if (dist <= r) candidate[c] = 1;
         if (dist < nearest_d) nearest_d = dist, nearest = c;
       }
-  if (nearest < 0) return GridResult::TooFew;
+  if (nearest < 0) return LatticeResult::TooFew;
   candidate[nearest] = 1;
 
   // The edge-connected piece holding the nearest triangle. Neighbours of type
@@ -280,7 +280,7 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
     }
   }
   const double predicted = M_PI * r * r / (0.25 * std::sqrt(3.0) * L * L);
-  if (double(queue.size()) < 0.25 * predicted) return GridResult::TooFew;
+  if (double(queue.size()) < 0.25 * predicted) return LatticeResult::TooFew;
 
   // Output in lattice order. Stillness (create_patch's snap): a vertex must
   // be where advection's projection from it lands next frame, on the triangle
@@ -346,14 +346,14 @@ GridResult grid_resample(const SurfaceQuery& surface, const PatchMesh& cut, cons
       for (int k = 0; k < 6; ++k) runs += candidate[ring[k]] == 2 && candidate[ring[(k + 5) % 6]] != 2;
       bowtie = runs > 1;
     }
-  if (!bowtie) return GridResult::Resampled;
+  if (!bowtie) return LatticeResult::Resampled;
   const std::size_t before = out.positions.size();
   split_nonmanifold_vertices(out);
   for (std::size_t v = before; v < out.positions.size(); ++v) {
     const ClosestHit hit = surface.closest(out.positions[v], 1e-6 * r);
     under.push_back(hit.found ? hit.triangle : -1);
   }
-  return GridResult::Resampled;
+  return LatticeResult::Resampled;
 }
 
 }  // namespace lapflow::detail

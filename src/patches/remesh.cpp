@@ -18,7 +18,7 @@
 #include <cmath>
 #include <functional>
 
-#include "patch_internal.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow::detail {
 namespace {
@@ -41,7 +41,7 @@ bool badly_shaped(const Vec3& a, const Vec3& b, const Vec3& c) {
   return rest - hi < 2 * cos160 * std::sqrt(prod);
 }
 
-class ArrayRemesher {
+class IsotropicRemesher {
  public:
   bool build(const PatchMesh& m);
   void split_long_edges(double high2);
@@ -110,7 +110,7 @@ class ArrayRemesher {
   std::vector<std::pair<double, int>> queue_;
 };
 
-void ArrayRemesher::ring(int v, std::vector<int>& out) const {
+void IsotropicRemesher::ring(int v, std::vector<int>& out) const {
   out.clear();
   const int start = out_he_[v];
   if (start < 0) return;
@@ -127,7 +127,7 @@ void ArrayRemesher::ring(int v, std::vector<int>& out) const {
   }
 }
 
-bool ArrayRemesher::build(const PatchMesh& m) {
+bool IsotropicRemesher::build(const PatchMesh& m) {
   const int nv = int(m.positions.size()), nt = int(m.triangles.size());
   pos_.assign(m.positions.begin(), m.positions.end());
   origin_.resize(3 * std::size_t(nt));
@@ -180,7 +180,7 @@ bool ArrayRemesher::build(const PatchMesh& m) {
 
 // Splits edge h at fraction t into two (four) triangles; the parts of the
 // edge keep indices h and twin(h) for the part next to their origin.
-void ArrayRemesher::split(int h, double t) {
+void IsotropicRemesher::split(int h, double t) {
   const int hn = next_he(h), hp = prev_he(h), o = twin_[h];
   const int a = origin_[h], b = origin_[hn], c = origin_[hp];
   const int m = int(pos_.size());
@@ -216,7 +216,7 @@ void ArrayRemesher::split(int h, double t) {
   }
 }
 
-void ArrayRemesher::split_long_edges(double high2) {
+void IsotropicRemesher::split_long_edges(double high2) {
   // Longest first, as CGAL does: the new edges of a split (halves and the
   // joins to the opposite vertices) are then never longer than the edge
   // split, so the process ends even on slivers (splitting in index order
@@ -258,7 +258,7 @@ void ArrayRemesher::split_long_edges(double high2) {
   }
 }
 
-double ArrayRemesher::border_turn_cos(int v) {
+double IsotropicRemesher::border_turn_cos(int v) {
   ring(v, ring_c_);
   int u, w;
   border_neighbours(ring_c_, u, w);
@@ -270,7 +270,7 @@ double ArrayRemesher::border_turn_cos(int v) {
 // Topology and geometry checks for collapsing halfedge h (origin a removed,
 // its edges moved to b, b placed at q): link condition, no ear left
 // dangling, no face flipped or made degenerate, no edge longer than high.
-bool ArrayRemesher::collapse_allowed(int h, const Vec3& q, double high2) {
+bool IsotropicRemesher::collapse_allowed(int h, const Vec3& q, double high2) {
   const int o = twin_[h], a = origin_[h], b = to(h);
   const int f = h / 3, g = o >= 0 ? o / 3 : -1;
   if (o >= 0 && border_[a] && border_[b]) return false;  // would pinch the patch
@@ -315,7 +315,7 @@ bool ArrayRemesher::collapse_allowed(int h, const Vec3& q, double high2) {
   return true;
 }
 
-void ArrayRemesher::collapse(int h, const Vec3& q) {
+void IsotropicRemesher::collapse(int h, const Vec3& q) {
   const int hn = next_he(h), hp = prev_he(h), o = twin_[h];
   const int a = origin_[h], b = origin_[hn], c = origin_[hp];
   for (int e : ring_a_) origin_[e] = b;
@@ -338,7 +338,7 @@ void ArrayRemesher::collapse(int h, const Vec3& q) {
   out_he_[a] = -1;
 }
 
-void ArrayRemesher::collapse_short_edges(double low2, double high2) {
+void IsotropicRemesher::collapse_short_edges(double low2, double high2) {
   // Shortest first (ties by index), as CGAL does: a min-heap of (squared
   // length, halfedge); after a collapse the short edges around the kept
   // vertex are queued (again). An edge whose collapse is refused is not
@@ -401,7 +401,7 @@ void ArrayRemesher::collapse_short_edges(double low2, double high2) {
   }
 }
 
-void ArrayRemesher::flip_for_valence() {
+void IsotropicRemesher::flip_for_valence() {
   const int nv = int(pos_.size());
   // Valence: outgoing halfedges, plus the incoming border one on the border.
   valence_.assign(nv, 0);
@@ -460,7 +460,7 @@ void ArrayRemesher::flip_for_valence() {
   }
 }
 
-void ArrayRemesher::relax() {
+void IsotropicRemesher::relax() {
   // One Gauss-Seidel sweep in vertex order. Inside: towards the area-weighted
   // centroid of the incident triangles, in the tangent plane. On the border:
   // towards the middle of the two border neighbours, along the border, where
@@ -508,7 +508,7 @@ void ArrayRemesher::relax() {
   }
 }
 
-bool ArrayRemesher::extract(PatchMesh& out) const {
+bool IsotropicRemesher::extract(PatchMesh& out) const {
   std::vector<int32_t> remap(pos_.size(), -1);
   out.positions.clear();
   out.triangles.clear();
@@ -527,9 +527,9 @@ bool ArrayRemesher::extract(PatchMesh& out) const {
 
 }  // namespace
 
-bool fast_remesh(PatchMesh& mesh, double target_edge, int iterations) {
+bool isotropic_remesh(PatchMesh& mesh, double target_edge, int iterations) {
   if (mesh.triangles.empty() || !(target_edge > 0)) return false;
-  thread_local ArrayRemesher remesher;
+  thread_local IsotropicRemesher remesher;
   if (!remesher.build(mesh)) return false;
   const double high = 4.0 / 3 * target_edge, low = 4.0 / 5 * target_edge;
   for (int i = 0; i < iterations; ++i) {

@@ -20,8 +20,8 @@
 #include <optional>
 #include <unordered_map>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
 
 namespace lapflow {
 namespace {

@@ -4,8 +4,8 @@
 #include <cmath>
 #include <limits>
 
-#include "lapflow/patches.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow {
 namespace detail {

@@ -8,9 +8,9 @@
 #include <cmath>
 #include <cstring>
 
-#include "lapflow/parallel.hpp"
-#include "raster_internal.hpp"
-#include "raster_sampling.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "raster/internal.hpp"
+#include "raster/sampling.hpp"
 
 namespace lapflow::detail {
 

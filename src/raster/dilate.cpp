@@ -7,8 +7,8 @@
 #include <cstdlib>
 #include <vector>
 
-#include "lapflow/parallel.hpp"
-#include "raster_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "raster/internal.hpp"
 
 namespace lapflow::detail {
 namespace {

@@ -11,10 +11,10 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/raster.hpp"
-#include "raster_internal.hpp"
-#include "raster_sampling.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "raster/internal.hpp"
+#include "raster/sampling.hpp"
 
 namespace lapflow {
 namespace detail {
@@ -192,7 +192,7 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
 }
 
 bool skip_distorted(const RasterContext& ctx, const Patch& patch, int t) {
-  if (ctx.mode == RasterMode::Advect) return false;
+  if (ctx.mode == RasterMode::NoErosion) return false;
   if (patch.triangle_delta.size() != patch.triangles.size()) return false;
   return !(patch.triangle_delta[t] <= ctx.delta_max);
 }
@@ -784,7 +784,7 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   st.seconds_resolve = seconds_since(t0);
 
   // Step 9, after hole filling so a newborn patch that covered nothing goes too.
-  const bool retire = options.retire && options.mode != RasterMode::Advect;
+  const bool retire = options.retire && options.mode != RasterMode::NoErosion;
   std::vector<Patch> kept;
   kept.reserve(patches.patches.size());
   for (std::size_t p = 0; p < patches.patches.size(); ++p) {

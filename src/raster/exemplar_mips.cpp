@@ -5,9 +5,9 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/raster.hpp"
-#include "raster_sampling.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "raster/sampling.hpp"
 
 namespace lapflow {
 namespace {

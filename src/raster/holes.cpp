@@ -14,9 +14,9 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/surface_query.hpp"
-#include "raster_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "raster/internal.hpp"
 
 namespace lapflow::detail {
 namespace {

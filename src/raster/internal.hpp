@@ -6,7 +6,7 @@
 #include <limits>
 #include <vector>
 
-#include "lapflow/raster.hpp"
+#include "lapflow/raster/raster.hpp"
 
 namespace lapflow::detail {
 

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lapflow/raster.hpp"
+#include "lapflow/raster/raster.hpp"
 
 namespace lapflow::detail {
 
@@ -31,7 +31,7 @@ inline void bilinear(const Image& img, double u, double v, float* out) {
 
 inline bool keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode) {
   if (!(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;  // also rejects NaN
-  if (mode == RasterMode::Advect) return true;
+  if (mode == RasterMode::NoErosion) return true;
   if (mode == RasterMode::Blend) return w > 0;  // every covering patch contributes, weighted by w
   float f;
   bilinear<1>(map.feature, u, v, &f);

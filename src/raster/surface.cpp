@@ -1,8 +1,8 @@
 // The production entry point of the rasterizer: hole-filling patches from
 // create_patch and vertex location by closest point on the frame's surface.
 // Kept apart from the rasterizer so its tests link without Embree or CGAL.
-#include "lapflow/raster.hpp"
-#include "lapflow/surface_query.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "lapflow/surface/surface_query.hpp"
 
 namespace lapflow {
 

@@ -17,7 +17,7 @@
 #include <cmath>
 #include <complex>
 
-#include "patch_internal.hpp"
+#include "patches/internal.hpp"
 
 namespace lapflow::detail {
 namespace {

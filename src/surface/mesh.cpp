@@ -1,4 +1,4 @@
-#include "lapflow/mesh.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 #include <numeric>
 

@@ -2,8 +2,8 @@
 #include <algorithm>
 #include <numeric>
 
-#include "lapflow/mesh.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

@@ -2,7 +2,7 @@
 // Embree's BVH is in float; the closest point itself is recomputed in double
 // from the mesh's own positions, so the projection residual is not limited by
 // float precision.
-#include "lapflow/surface_query.hpp"
+#include "lapflow/surface/surface_query.hpp"
 
 #include <embree3/rtcore.h>
 
@@ -12,7 +12,7 @@
 #include <mutex>
 #include <vector>
 
-#include "lapflow/errors.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 

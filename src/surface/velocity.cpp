@@ -1,5 +1,5 @@
 // Per-vertex velocities sampled anywhere near the surface.
-#include "lapflow/velocity.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 

@@ -16,8 +16,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 namespace {

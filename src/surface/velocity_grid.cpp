@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <mutex>
 
-#include "lapflow/errors.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 

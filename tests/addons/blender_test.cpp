@@ -9,7 +9,7 @@
 #include <filesystem>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/image.hpp"
+#include "lapflow/io/image.hpp"
 
 namespace lapflow {
 namespace {

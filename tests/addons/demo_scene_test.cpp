@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/demo_scene.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

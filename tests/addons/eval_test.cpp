@@ -10,13 +10,13 @@
 #include <nlohmann/json.hpp>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/eval.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/addons/eval.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/bake/bake.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;
@@ -137,7 +137,7 @@ void write_sphere_sequence(const std::string& dir, int frames, const Vec3& veloc
 
 TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   TempDir dir("eval_toy");
-  write_toy_bake(dir, {ToyFrame{9}, ToyFrame{11}});
+  write_toy_bake(dir, {ToyFrame{9, {}, {}}, ToyFrame{11, {}, {}}});
   const EvalReport r = evaluate_bake(dir.str());
   ASSERT_EQ(r.frames.size(), 2u);
   const FrameMetrics& f1 = r.frames[0];
@@ -300,7 +300,7 @@ TEST(Eval, BlendingLowersContrast) {
 
 TEST(Eval, CommandLinePrintsJsonAndWritesPlots) {
   TempDir dir("eval_cli");
-  write_toy_bake(dir, {ToyFrame{9}, ToyFrame{11}});
+  write_toy_bake(dir, {ToyFrame{9, {}, {}}, ToyFrame{11, {}, {}}});
   std::string out, err;
   ASSERT_EQ(test::run_command(std::string(LAPFLOW_BINARY) + " eval '" + dir.str() + "' --json --quiet", &out, &err, dir),
             0)

@@ -6,10 +6,10 @@
 #include <limits>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/feature_map.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/addons/feature_map.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/core/parallel.hpp"
 
 namespace lapflow {
 namespace {

@@ -11,11 +11,11 @@
 #include <numbers>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/preview.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/addons/preview.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {

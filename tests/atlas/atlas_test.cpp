@@ -10,9 +10,9 @@
 #include <numbers>
 #include <sstream>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "io_test_helpers.hpp"
 #include "test_helpers.hpp"
 
@@ -261,7 +261,9 @@ void check_atlas(const TriMesh& m, const SurfaceAtlas& a, const AtlasOptions& o,
   // the triangle's uv puts the 3D point of (triangle, b1, b2).
   const int n = o.resolution;
   for (std::size_t i = 0; i < a.texels.size(); ++i) {
-    if (i > 0) ASSERT_LT(a.texels.texel[i - 1], a.texels.texel[i]);
+    if (i > 0) {
+      ASSERT_LT(a.texels.texel[i - 1], a.texels.texel[i]);
+    }
     const int32_t t = a.texels.triangle[i];
     ASSERT_GE(t, 0);
     ASSERT_LT(std::size_t(t), nt);
@@ -369,7 +371,9 @@ TEST(SurfaceAtlas, HundredsOfDropletsGetTheirOwnCharts) {
   EXPECT_GE(a.chart_count, 2 * components);  // closed: at least two charts each
   for (std::size_t t = 0; t < m.triangle_count(); ++t)
     for (std::size_t u = t + 1; u < std::min(m.triangle_count(), t + 20); ++u)
-      if (a.chart_of_triangle[t] == a.chart_of_triangle[u]) EXPECT_EQ(comp[t], comp[u]);
+      if (a.chart_of_triangle[t] == a.chart_of_triangle[u]) {
+        EXPECT_EQ(comp[t], comp[u]);
+      }
 }
 
 TEST(SurfaceAtlas, SameAtlasForOneAndTwoThreads) {

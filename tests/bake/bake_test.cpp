@@ -9,12 +9,12 @@
 #include <fstream>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/demo_scene.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/pipeline.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/bake/bake.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;
@@ -70,7 +70,9 @@ TEST(Bake, EveryChartTexelIsCoveredOnEveryFrame) {
       for (int x = 0; x < color.width; ++x) {
         const bool inside = color.at(x, y, 3) == 1.f;
         alpha += inside;
-        if (inside) EXPECT_GE(aov.at(x, y, 0), 0.f);
+        if (inside) {
+          EXPECT_GE(aov.at(x, y, 0), 0.f);
+        }
       }
     EXPECT_EQ(alpha, s.chart_texels);
   }

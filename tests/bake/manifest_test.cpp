@@ -4,8 +4,8 @@
 #include <filesystem>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/errors.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow {
 namespace {
@@ -17,7 +17,7 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   o.out_dir = dir.str();
   o.mesh_pattern = "sim/fluid.%04d.ply";
   o.exemplar_color = "pebbles.color.png";
-  o.raster.mode = RasterMode::Advect;
+  o.raster.mode = RasterMode::NoErosion;
   o.patch.radius = 0.04;
   o.atlas.resolution = 2048;
   o.seed = 7;

@@ -8,10 +8,10 @@
 #include <limits>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 using namespace lapflow;
 using lapflow::test::TempDir;
@@ -247,7 +247,9 @@ TEST(BadInput, RandomCorruptionsEitherReadOrThrowInputError) {
       for (const Tri& f : m.triangles)
         for (int32_t x : f) ASSERT_TRUE(x >= 0 && x < int32_t(m.vertex_count()));
       for (const Vec3& p : m.positions) ASSERT_TRUE(is_finite(p));
-      if (m.has_velocities()) ASSERT_EQ(m.velocities.size(), m.positions.size());
+      if (m.has_velocities()) {
+        ASSERT_EQ(m.velocities.size(), m.positions.size());
+      }
       ++reads;
     } catch (const InputError& e) {
       EXPECT_EQ(e.file(), path);

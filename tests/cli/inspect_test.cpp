@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/mesh_io.hpp"
+#include "lapflow/io/mesh_io.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

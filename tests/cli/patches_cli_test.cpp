@@ -10,8 +10,8 @@
 #include <sstream>
 #include <string>
 
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/patches/patches.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

@@ -1,5 +1,5 @@
 #include <gtest/gtest.h>
-#include "lapflow/parallel.hpp"
+#include "lapflow/core/parallel.hpp"
 TEST(Hash, IsDeterministicAndSpreads) {
   EXPECT_EQ(lapflow::hash64(1, 2, 3), lapflow::hash64(1, 2, 3));
   EXPECT_NE(lapflow::hash64(1, 2, 3), lapflow::hash64(1, 2, 4));

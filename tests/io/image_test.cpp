@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/image.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/image.hpp"
 
 namespace lapflow {
 namespace {
@@ -242,7 +242,9 @@ TEST(ImageIo, ResizeKnownAnswers) {
   double mean = 0;
   for (int x = 0; x < 16; ++x) {
     mean += big.at(x, 0, 0) / 16.0;
-    if (x > 0) EXPECT_GE(big.at(x, 0, 0), big.at(x - 1, 0, 0));
+    if (x > 0) {
+      EXPECT_GE(big.at(x, 0, 0), big.at(x - 1, 0, 0));
+    }
   }
   EXPECT_NEAR(mean, 1.5, 1e-6);
 }
@@ -329,7 +331,7 @@ TEST(Exemplar, UnreadableImagesAreInputErrorsNamingTheFile) {
   write_png(dir / "f.png", Image(8, 8, 1, 0.5f), false, 16);
   test::write_bytes(dir / "broken.png", "\x89PNG\r\n\x1a\n this is not a png");
   test::write_bytes(dir / "text.jpg", "hello");
-  for (const std::string bad : {dir / "broken.png", dir / "text.jpg", dir / "missing.png"}) {
+  for (const std::string& bad : {dir / "broken.png", dir / "text.jpg", dir / "missing.png"}) {
     try {
       load_exemplar(bad, dir / "f.png");
       FAIL() << "expected InputError for " << bad;

@@ -6,8 +6,8 @@
 #include <regex>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

@@ -8,10 +8,10 @@
 #include <fstream>
 #include <sstream>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/errors.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/uv_mesh.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/io/uv_mesh.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {

@@ -6,9 +6,9 @@
 #include <memory>
 #include <set>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "patches/internal.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

@@ -1,5 +1,5 @@
 // Tangent-plane resampling of new patches (patch_resample.cpp,
-// Remesher::Grid): on the fluid, not flipped, equilateral away from the
+// Remesher::Lattice): on the fluid, not flipped, equilateral away from the
 // border, the expected size, holes kept, the remesher where the cut is not a
 // height field, and the same patches for any thread count.
 #include <gtest/gtest.h>
@@ -9,16 +9,16 @@
 #include <map>
 #include <numeric>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/surface_query.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "patches/internal.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {
 namespace {
 
-using detail::GridResult;
+using detail::LatticeResult;
 using detail::PatchPath;
 using detail::PatchTrace;
 
@@ -42,7 +42,7 @@ Made make(const SurfaceQuery& surface, const Vec3& at, double r) {
   SurfacePoint sp{hit.point, normalized(triangle_normal_area2(surface.mesh(), hit.triangle)), hit.triangle};
   PatchOptions o;
   o.radius = r;
-  o.remesher = Remesher::Grid;
+  o.remesher = Remesher::Lattice;
   Made m;
   auto p = detail::create_patch_traced(surface, build_surface_adjacency(surface.mesh()), sp, 7, 0, o, {}, m.trace);
   EXPECT_TRUE(p);
@@ -133,7 +133,7 @@ TEST(PatchesResample, PlaneGivesAnEquilateralDiskOnTheFluid) {
   const SurfaceQuery surface(plane);
   const Vec3 axis = normalized(Vec3{1, 2, 0.5});
   const Made m = make(surface, test::rotate({0.503, 0.497, 0}, axis, 0.6), r);
-  EXPECT_EQ(m.trace.path, PatchPath::Grid);
+  EXPECT_EQ(m.trace.path, PatchPath::Lattice);
   expect_good_patch(surface, m.patch, r, 59.99);  // a flat lattice: 60 degrees exactly
   // Triangles within r of p, on a lattice of edge l: about the disk of radius
   // r + l/2 over the area of one triangle.
@@ -150,7 +150,7 @@ TEST(PatchesResample, SphereCapIsResampledOnTheSphere) {
   for (const Vec3 at : {Vec3{0.3, 0.5, 0.8}, Vec3{-0.9, 0.1, -0.2}, Vec3{0, 0, -1}}) {
     SCOPED_TRACE(at.x);
     const Made m = make(surface, at, r);
-    EXPECT_EQ(m.trace.path, PatchPath::Grid);
+    EXPECT_EQ(m.trace.path, PatchPath::Lattice);
     // On the unit sphere the cap at r tilts by about 15 degrees: the lifted
     // lattice stretches radially by at most 1/cos(15 deg) ~ 1.04.
     expect_good_patch(surface, m.patch, r, 50);
@@ -186,7 +186,7 @@ TEST(PatchesResample, HolesStayHolesAndThePatchStaysOne) {
   const SurfaceQuery surface(plane);
   const Vec3 axis = normalized(Vec3{1, 2, 0.5});
   const Made m = make(surface, test::rotate({0.5, 0.5, 0}, axis, 0.6), r);
-  EXPECT_EQ(m.trace.path, PatchPath::Grid);
+  EXPECT_EQ(m.trace.path, PatchPath::Lattice);
   expect_good_patch(surface, m.patch, r, 59.99);
   expect_no_triangle_over_a_hole(surface, m.patch, r);
   // One piece (LSCM flattened it) with the outer border and both holes.
@@ -216,7 +216,7 @@ TEST(PatchesResample, HolesInsideALatticeTriangleStayHoles) {
   const SurfaceQuery surface(plane);
   const Vec3 axis = normalized(Vec3{1, 2, 0.5});
   const Made m = make(surface, test::rotate({0.5, 0.5, 0}, axis, 0.6), r);
-  EXPECT_EQ(m.trace.path, PatchPath::Grid);
+  EXPECT_EQ(m.trace.path, PatchPath::Lattice);
   expect_good_patch(surface, m.patch, r, 59.99);
   expect_no_triangle_over_a_hole(surface, m.patch, r);
   EXPECT_EQ(border_loops(m.patch.triangles), 7);
@@ -229,7 +229,7 @@ TEST(PatchesResample, NotAHeightFieldFallsBackToTheRemesher) {
     const TriMesh drop = test::icosphere(3, 0.06, {1, 2, 3});
     const SurfaceQuery surface(drop);
     const Made m = make(surface, {1, 2, 3.1}, r);
-    EXPECT_EQ(m.trace.grid, GridResult::Steep);
+    EXPECT_EQ(m.trace.lattice, LatticeResult::Steep);
     EXPECT_EQ(m.trace.path, PatchPath::Remeshed);
   }
   // A spiral ramp (helicoid, z = c theta, 1.5 turns) around p: every
@@ -252,8 +252,8 @@ TEST(PatchesResample, NotAHeightFieldFallsBackToTheRemesher) {
       }
     const SurfaceQuery surface(ramp);
     const Made m = make(surface, {0.06, 0.001, 0}, r);
-    EXPECT_EQ(m.trace.grid, GridResult::Overlap);
-    EXPECT_NE(m.trace.path, PatchPath::Grid);
+    EXPECT_EQ(m.trace.lattice, LatticeResult::Overlap);
+    EXPECT_NE(m.trace.path, PatchPath::Lattice);
     ASSERT_FALSE(m.patch.triangles.empty());
   }
 }
@@ -263,7 +263,7 @@ TEST(PatchesResample, SamePatchesForOneAndTwoThreads) {
   const SurfaceQuery surface(sphere);
   PatchOptions o;
   o.radius = 0.2;
-  o.remesher = Remesher::Grid;
+  o.remesher = Remesher::Lattice;
   const PatchSet one = test::seed_on_threads(surface, o, 1), two = test::seed_on_threads(surface, o, 2);
   ASSERT_GT(one.patches.size(), 50u);
   test::expect_same_patches(one, two);

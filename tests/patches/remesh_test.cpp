@@ -12,11 +12,11 @@
 #include <numeric>
 #include <string>
 
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/surface_query.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "patches/internal.hpp"
 #include "io_test_helpers.hpp"
 #include "test_helpers.hpp"
 
@@ -146,7 +146,7 @@ void compare_remeshers(const PatchMesh& input, double target, const std::functio
   ASSERT_TRUE(in.manifold);
   ASSERT_EQ(in.flipped, 0);
   PatchMesh fast = input, cgal = input;
-  ASSERT_TRUE(detail::fast_remesh(fast, target));
+  ASSERT_TRUE(detail::isotropic_remesh(fast, target));
   ASSERT_TRUE(detail::cgal_remesh(cgal, target));
   const Quality qf = measure(fast, target, normal), qc = measure(cgal, target, normal);
   if (std::getenv("LAPFLOW_REMESH_STATS"))
@@ -206,7 +206,7 @@ TEST(PatchesRemesh, RejectsNonManifoldInput) {
   // Three triangles on one edge.
   PatchMesh m{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}}, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}}};
   const PatchMesh before = m;
-  EXPECT_FALSE(detail::fast_remesh(m, 0.3));
+  EXPECT_FALSE(detail::isotropic_remesh(m, 0.3));
   EXPECT_EQ(m.triangles, before.triangles);
 }
 
@@ -241,7 +241,7 @@ TEST(PatchesRemesh, CreatedPatchLiesOnTheSurfaceForAnyThreadCount) {
   const SurfaceQuery surface(grid);
   PatchOptions o;
   o.radius = 0.12;
-  o.remesher = Remesher::Fast;
+  o.remesher = Remesher::Isotropic;
   const PatchSet one = test::seed_on_threads(surface, o, 1), two = test::seed_on_threads(surface, o, 2);
   ASSERT_GT(one.patches.size(), 20u);
   test::expect_same_patches(one, two);

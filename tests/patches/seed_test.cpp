@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

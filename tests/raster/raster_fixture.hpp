@@ -8,10 +8,10 @@
 #include <optional>
 #include <vector>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/raster.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/raster/raster.hpp"
 
 namespace lapflow::test {
 

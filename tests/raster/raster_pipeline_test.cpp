@@ -10,13 +10,13 @@
 #include <map>
 #include <set>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/raster.hpp"
-#include "lapflow/surface_query.hpp"
-#include "raster_fixture.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "raster/raster_fixture.hpp"
 #include "test_helpers.hpp"
 
 namespace lapflow {

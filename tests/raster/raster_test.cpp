@@ -10,10 +10,10 @@
 #include <map>
 #include <mutex>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/raster.hpp"
-#include "raster_fixture.hpp"
-#include "raster_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "raster/raster_fixture.hpp"
+#include "raster/internal.hpp"
 
 namespace lapflow {
 namespace {
@@ -358,7 +358,9 @@ TEST(Raster, GutterAndBackgroundTakeTheNearestChartTexel) {
           equals_a_neighbour |= out.color.at(xx, yy, 0) == out.color.at(x, y, 0) &&
                                 out.aov.at(xx, yy, 0) == out.aov.at(x, y, 0);
         }
-      if (next_to_chart) EXPECT_TRUE(equals_a_neighbour) << x << "," << y;
+      if (next_to_chart) {
+        EXPECT_TRUE(equals_a_neighbour) << x << "," << y;
+      }
       EXPECT_GE(out.aov.at(x, y, 0), 0.f);  // every pixel got some chart texel's values
     }
 }
@@ -439,7 +441,7 @@ TEST(Raster, AdvectModeNeitherErodesNorRetires) {
   EXPECT_EQ(er.patches.patches.size(), 0u);  // both retired
 
   Scene ad = scene();
-  o.mode = RasterMode::Advect;
+  o.mode = RasterMode::NoErosion;
   const FrameTextures kept = ad.run(o, false);
   EXPECT_EQ(ad.patches.patches.size(), 2u);
   EXPECT_EQ(kept.stats.patches_retired, 0u);

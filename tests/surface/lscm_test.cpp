@@ -3,9 +3,9 @@
 
 #include <cmath>
 
-#include "lapflow/parallel.hpp"
-#include "lapflow/patches.hpp"
-#include "patch_internal.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "patches/internal.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;
@@ -183,7 +183,9 @@ TEST_P(CreatePatch, PlanarPatchIsPlacedInTheUnitSquare) {
     EXPECT_LE(norm(patch->rest_uv[v] - Vec2{0.5, 0.5}), 0.7);
     EXPECT_GE(patch->surface_triangle[v], 0);
     // B_V: boundary vertices far from the centre are 0, the rest 1.
-    if (norm(patch->rest_uv[v] - Vec2{0.5, 0.5}) < 0.3) EXPECT_EQ(patch->border[v], 1);
+    if (norm(patch->rest_uv[v] - Vec2{0.5, 0.5}) < 0.3) {
+      EXPECT_EQ(patch->border[v], 1);
+    }
   }
   int zero_border = 0;
   for (uint8_t b : patch->border) zero_border += b == 0;

@@ -1,8 +1,8 @@
 // analyze_mesh: known answers on tiny meshes built in code.
 #include <gtest/gtest.h>
 
-#include "lapflow/mesh.hpp"
-#include "lapflow/parallel.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lapflow/surface_query.hpp"
+#include "lapflow/surface/surface_query.hpp"
 
 using namespace lapflow;
 

@@ -7,10 +7,10 @@
 #include <cmath>
 
 #include "io_test_helpers.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/parallel.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;

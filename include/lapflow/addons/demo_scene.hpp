@@ -8,7 +8,7 @@
 #include <functional>
 #include <string>
 
-#include "lapflow/mesh.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow {
 

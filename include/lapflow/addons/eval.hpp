@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/mesh_io.hpp"
+#include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow {
 

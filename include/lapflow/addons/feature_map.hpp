@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/image.hpp"
+#include "lapflow/io/image.hpp"
 
 namespace lapflow {
 

@@ -9,11 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/bake_manifest.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/raster.hpp"
-#include "lapflow/vec.hpp"
+#include "lapflow/bake/manifest.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "lapflow/core/vec.hpp"
 
 namespace lapflow {
 

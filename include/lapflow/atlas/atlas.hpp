@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "lapflow/mesh.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow {
 

@@ -7,11 +7,11 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/mesh_io.hpp"
-#include "lapflow/patches.hpp"
-#include "lapflow/raster.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
+#include "lapflow/patches/patches.hpp"
+#include "lapflow/raster/raster.hpp"
 
 namespace lapflow {
 

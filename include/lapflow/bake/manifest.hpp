@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/pipeline.hpp"
+#include "lapflow/bake/bake.hpp"
 
 namespace lapflow {
 

@@ -36,10 +36,11 @@ Image resize_image(const Image& img, int width, int height);
 void sample_bilinear(const Image& img, double u, double v, float* out);
 
 enum class ExrPixelType { Half, Float };
-/// Rle (the default): lossless run lengths. Piz: lossless wavelet + Huffman,
-/// 8-27% smaller on the shipped exemplars' atlases but about 5x the CPU to
-/// write (a fifth of a 6144^2 bake's CPU time) and slower to read. Zip:
-/// lossless zlib, smallest and slowest. Dwaa: lossy. None.
+/// Rle (the default): lossless run lengths, cheap to write and read. Piz:
+/// lossless wavelet + Huffman, smaller files but its Huffman coder costs far
+/// more CPU to write and read, so it is not the default
+/// (docs/performance.md). Zip: lossless zlib, smallest and slowest. Dwaa:
+/// lossy. None.
 enum class ExrCompression { Piz, Zip, Dwaa, None, Rle };
 struct ExrOptions {
   ExrPixelType type = ExrPixelType::Half;

@@ -4,7 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/mesh.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow {
 

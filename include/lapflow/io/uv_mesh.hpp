@@ -3,8 +3,8 @@
 /// the file renderers load next to the colour and displacement atlases.
 #include <string>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/mesh.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow {
 

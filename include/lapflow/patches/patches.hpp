@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/mesh.hpp"
-#include "lapflow/surface_query.hpp"
-#include "lapflow/velocity.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 
@@ -49,24 +49,27 @@ struct SurfacePoint {
   int triangle = -1;
 };
 
-/// How new patches are made isotropic. Fast and Cgal are the same remeshing
-/// algorithm; Grid resamples instead where it can (docs/patches.md).
+/// How a new patch's triangles are made even before flattening
+/// (docs/patches.md). Isotropic and CgalIsotropic are the same remeshing
+/// algorithm; Lattice resamples instead where it can. CLI: `--remesher
+/// lattice|isotropic|cgal` (`grid` and `fast` are the old names).
 enum class Remesher {
-  Fast,  ///< plain arrays specialised for small disks (patch_remesh.cpp)
-  Cgal,  ///< CGAL::Polygon_mesh_processing::isotropic_remeshing
-  Grid,  ///< an equilateral lattice (edge 0.8 remesh_edge r, the remesher's mean edge) in
-         ///< p's tangent plane lifted onto the fluid (patch_resample.cpp); Fast where the
-         ///< cut is not a height field over that plane
+  Isotropic,      ///< isotropic remeshing on plain arrays, specialised for small disks (patches/remesh.cpp)
+  CgalIsotropic,  ///< CGAL::Polygon_mesh_processing::isotropic_remeshing (patches/cgal.cpp)
+  Lattice,        ///< an equilateral lattice (edge 0.8 remesh_edge r, the remesher's mean edge) in
+                  ///< p's tangent plane lifted onto the fluid (patches/lattice.cpp); Isotropic
+                  ///< where the cut is not a height field over that plane
 };
 
 struct PatchOptions {
   double radius = 0.1;            ///< r in metres: the exemplar spans 2r on the surface
   /// Isotropic remeshing of each new patch before flattening (`remesher`), then
-  /// trimmed to distance r of p. On by default: on dam_break it doubles the
-  /// mean weight at equal distortion (docs/patches.md).
+  /// trimmed to distance r of p. On by default: an unremeshed cut has few
+  /// vertices, most of them on its border where B_V = 0, so its weights start
+  /// low; remeshed patches keep more texture for the same flow (docs/patches.md).
   bool remesh = true;
   double remesh_edge = 1.0 / 6;   ///< target edge length as a fraction of r
-  Remesher remesher = Remesher::Grid;  ///< Grid: same weights and lifetimes as Fast on dam_break, half the cost
+  Remesher remesher = Remesher::Lattice;  ///< the same weights and lifetimes as Isotropic, for less work (docs/patches.md)
   /// Orientation: random angle from hash(seed, patch id) unless `align` is
   /// set, in which case u follows `align_direction` projected on the tangent plane.
   bool align = false;
@@ -83,8 +86,8 @@ struct AdvectOptions {
   /// Sub-steps so that |v| * h <= fraction * r: a step never jumps farther
   /// than a few patch radii between two velocity samples. Accuracy is kept
   /// by the turn rule below; this one only bounds how far from both surfaces
-  /// a velocity is sampled. 4 rather than 1: on the 100k-triangle demo with
-  /// 5k patches it cut advection by 40% with every patch test unchanged.
+  /// a velocity is sampled, so it can be loose: 4 rather than 1 saves
+  /// sub-steps with every patch test unchanged (docs/patches.md).
   double max_step_fraction = 4.0;
   /// Sub-steps so that the velocity turns by at most this angle (radians)
   /// per step: RK2's error grows with the cube of the turn (vortices), not

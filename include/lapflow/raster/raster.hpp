@@ -15,9 +15,9 @@
 #include <optional>
 #include <vector>
 
-#include "lapflow/atlas.hpp"
-#include "lapflow/image.hpp"
-#include "lapflow/patches.hpp"
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/image.hpp"
+#include "lapflow/patches/patches.hpp"
 
 namespace lapflow {
 
@@ -25,7 +25,8 @@ namespace lapflow {
 enum class RasterMode {
   Erosion,  ///< the paper (2021): oldest non-eroded patch wins, no blending
   Blend,    ///< 2019 baseline: every covering patch with w > 0 contributes, colour = sum w c / sum w (ghosts)
-  Advect,   ///< no erosion, no retirement (oldest covering patch wins); holes still filled
+  NoErosion,  ///< `--mode advect`: patches are only advected, no erosion, no retirement (oldest covering
+              ///< patch wins); holes still filled
 };
 
 struct RasterOptions {

@@ -3,7 +3,7 @@
 #include <string>
 #include <vector>
 
-#include "lapflow/vec.hpp"
+#include "lapflow/core/vec.hpp"
 
 namespace lapflow {
 

@@ -3,7 +3,7 @@
 /// (Embree 3 behind a pimpl: no Embree type leaks out).
 #include <memory>
 
-#include "lapflow/mesh.hpp"
+#include "lapflow/surface/mesh.hpp"
 
 namespace lapflow {
 

@@ -4,8 +4,8 @@
 #include <memory>
 #include <string>
 
-#include "lapflow/mesh.hpp"
-#include "lapflow/surface_query.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/surface/surface_query.hpp"
 
 namespace lapflow {
 
