@@ -1,9 +1,9 @@
 // lapflow_bench: speed and memory of the stages and of the whole bake, on
-// generated scenes and on ../shared/data. Numbers go in the README.
+// generated scenes and on ../shared/data. Numbers go in docs/performance.md (headline rows in the README).
 //
 //   lapflow_bench                 every benchmark below, each bake in its own process (peak RSS per run)
 //   lapflow_bench bake-demo N R   one bake of the ~100k-triangle demo at N x N, radius R (0 = ~5k patches)
-//   lapflow_bench bake-data DIR N one bake of DIR/<scene>.%04d.ply at N x N
+//   lapflow_bench bake-data PATTERN N  one bake of the mesh sequence PATTERN (e.g. .../dam_break.%04d.ply) at N x N
 //   lapflow_bench raster [N...]   the rasterizer alone at the given resolutions
 //   lapflow_bench atlas [DATA]    the surface atlas alone
 //   lapflow_bench patches [DATA]  the patch stages alone

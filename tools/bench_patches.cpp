@@ -136,7 +136,8 @@ void bench_sphere() {
     PatchSet s = big;
     const std::size_t nv = vertex_total(s);
     const Timer t;
-    const AdvectStats st = advect_patches(qb, spin, spin, po, ao, {}, s);
+    const AdvectStats st = advect_patches(qb, spin, spin, po, ao, s);
+    update_weights(qb.mesh(), r, {}, s);
     fmt::print("  advect+project (analytic v) {} for {} vertices, {} removed\n", t.text(), nv, st.vertices_removed);
   }
   {
@@ -149,7 +150,8 @@ void bench_sphere() {
     PatchSet s = big;
     const std::size_t nv = vertex_total(s);
     const Timer t;
-    const AdvectStats st = advect_patches(qb2, vertex_velocity_field(qa2), vertex_velocity_field(qb2), po, ao, {}, s);
+    const AdvectStats st = advect_patches(qb2, vertex_velocity_field(qa2), vertex_velocity_field(qb2), po, ao, s);
+    update_weights(qb2.mesh(), r, {}, s);
     fmt::print("  advect+project (vertex v)   {} for {} vertices, {} removed\n", t.text(), nv, st.vertices_removed);
     // The bake's default: per-vertex velocities sampled on a band of voxels
     // (BakeOptions::velocity_voxel = 2 mean edges, velocity_band = 6), built
@@ -164,21 +166,25 @@ void bench_sphere() {
     const std::string built = tb.text();
     PatchSet s2 = big;
     const Timer t2;
-    const AdvectStats st2 = advect_patches(qb2, va, vb, po, ao, {}, s2);
+    const AdvectStats st2 = advect_patches(qb2, va, vb, po, ao, s2);
+    update_weights(qb2.mesh(), r, {}, s2);
     fmt::print("  advect+project (banded v)   {} for {} vertices, {} removed (2 bands built in {})\n", t2.text(), nv,
                st2.vertices_removed, built);
   }
 }
 
 void bench_dam_break(const std::string& data_dir) {
-  const std::string f1 = data_dir + "/dam_break/dam_break.0001.ply", f2 = data_dir + "/dam_break/dam_break.0002.ply";
-  if (!std::filesystem::exists(f1) || !std::filesystem::exists(f2)) {
+  FrameSource source;  // the bake's velocity rules, exact per-vertex sampling
+  source.mesh_pattern = data_dir + "/dam_break/dam_break.%04d.ply";
+  source.velocity_band = 0;
+  const FramePattern pattern(source.mesh_pattern);
+  if (!std::filesystem::exists(pattern.path(1)) || !std::filesystem::exists(pattern.path(2))) {
     fmt::print("dam_break: not found under {}, skipped\n", data_dir);
     return;
   }
-  const TriMesh a = read_mesh(f1), b = read_mesh(f2);
-  const SurfaceQuery qa(a), qb(b);
-  fmt::print("dam_break frames 1-2, {} triangles\n", a.triangles.size());
+  const std::unique_ptr<Frame> a = load_frame(source, 1), b = load_frame(source, 2);
+  const SurfaceQuery &qa = *a->surface, &qb = *b->surface;
+  fmt::print("dam_break frames 1-2, {} triangles\n", a->mesh.triangles.size());
   for (double r : {0.08, 0.02}) {
     PatchOptions po;
     po.radius = r;
@@ -189,7 +195,8 @@ void bench_dam_break(const std::string& data_dir) {
     const std::size_t nv = vertex_total(s);
     const Timer t;
     const AdvectStats st =
-        advect_patches(qb, vertex_velocity_field(qa), vertex_velocity_field(qb), po, {}, {}, s);
+        advect_patches(qb, a->velocity, b->velocity, po, {}, s);
+    update_weights(qb.mesh(), r, {}, s);
     fmt::print("  r = {:.2f}: seed_patches {} ({} patches, {} vertices); advect+project {} ({} removed)\n", r, seeded,
                s.patches.size(), nv, t.text(), st.vertices_removed);
   }

@@ -230,7 +230,7 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
                                          : std::string(m) == "advect" ? RasterMode::NoErosion : RasterMode::Erosion;
     const double cpu0 = cpu_seconds();
     const FrameTextures out =
-        rasterize_atlas(P.mesh, P.atlas, rex, o, WeightOptions{}, 0, maker, TriangleLocator{}, patches);
+        raster_frame(P.mesh, P.atlas, rex, o, WeightOptions{}, 0, maker, TriangleLocator{}, patches);
     const RasterStats& s = out.stats;
     fmt::print("{:>6} {:>10} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7} {:>6} {:>7} {:>7.2f}\n", N,
                s.chart_texels, s.seconds_setup, s.seconds_raster, s.seconds_holes, s.seconds_resolve,

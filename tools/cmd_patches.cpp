@@ -11,6 +11,7 @@
 
 #include "cli_common.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/bake/frame.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/patches/patches.hpp"
 #include "lapflow/surface/surface_query.hpp"
@@ -20,52 +21,12 @@ namespace lapflow::cli {
 namespace {
 
 struct PatchesCommand {
-  std::string mesh_pattern, frames, out_dir, name, vdb_pattern, grid_name, orientation = "random";
-  double radius = 0, fps = 24, min_speed = 0, spacing = 1, delta_max = 3;
+  FrameSource source;  ///< meshes and velocity: the bake's rules and defaults
+  std::string frames, out_dir, name, orientation = "random";
+  double radius = 0, fps = 24, spacing = 1, delta_max = 3;
   bool remesh = true;
   Remesher remesher = PatchOptions{}.remesher;
 };
-
-// One frame's surface with what samples velocity on it (all owned here so the
-// references inside the fields stay valid). Members are replaced in
-// declaration order on move: users before what they use.
-struct Frame {
-  int number = 0;
-  VelocityField velocity;
-  std::unique_ptr<VelocityGrid> grid;
-  std::unique_ptr<SurfaceQuery> query;
-  std::unique_ptr<TriMesh> mesh;
-};
-
-Frame load_frame(const PatchesCommand& c, const FramePattern& meshes, const std::optional<FramePattern>& vdbs,
-                 int number, bool& warned_no_velocity) {
-  Frame f;
-  f.number = number;
-  try {
-    f.mesh = std::make_unique<TriMesh>(read_mesh(meshes.path(number)));
-  } catch (const InputError& e) {
-    throw e.with_frame(number);
-  }
-  f.query = std::make_unique<SurfaceQuery>(*f.mesh);
-  if (vdbs) {
-    try {
-      f.grid = std::make_unique<VelocityGrid>(vdbs->path(number), c.grid_name);
-    } catch (const InputError& e) {
-      throw e.with_frame(number);
-    }
-    f.velocity = grid_velocity_field(*f.grid);
-  } else {
-    if (!f.mesh->has_velocities() && !f.mesh->empty() && !warned_no_velocity) {
-      warn("frame {}: {} has no per-vertex velocity and no --velocity-vdb was given: patches only follow the surface "
-           "by projection",
-           number, meshes.path(number));
-      warned_no_velocity = true;
-    }
-    f.velocity = vertex_velocity_field(*f.query);
-  }
-  f.velocity = with_min_speed(std::move(f.velocity), c.min_speed);
-  return f;
-}
 
 struct Counts {
   std::size_t patches = 0, vertices = 0, triangles = 0;
@@ -103,13 +64,11 @@ void run_patches(const PatchesCommand& c) {
   if (!(c.delta_max > 1)) throw UsageError("--delta-max must be greater than 1");
   Vec3 align_direction;
   const bool align = parse_orientation(c.orientation, align_direction);
-  const FramePattern meshes(c.mesh_pattern);
+  const FramePattern meshes(c.source.mesh_pattern);
   std::optional<FrameRange> range;
   if (!c.frames.empty()) range = parse_frame_range(c.frames);
   const std::vector<int> frames = resolve_frames(meshes, range);
-  std::optional<FramePattern> vdbs;
-  if (!c.vdb_pattern.empty()) vdbs.emplace(c.vdb_pattern);
-  const std::string name = c.name.empty() ? default_output_name(c.mesh_pattern) : c.name;
+  const std::string name = c.name.empty() ? default_output_name(c.source.mesh_pattern) : c.name;
   std::error_code ec;
   std::filesystem::create_directories(c.out_dir, ec);
   if (ec) throw OutputError(c.out_dir + ": cannot create the output folder: " + ec.message());
@@ -128,27 +87,27 @@ void run_patches(const PatchesCommand& c) {
   AdvectOptions ao;
 
   auto out_path = [&](int frame) { return (std::filesystem::path(c.out_dir) / fmt::format("{}.patches.{:04d}.ply", name, frame)).string(); };
-  bool warned = false;
   PatchSet set;
   Progress progress("patches", frames.size());
-  Frame prev = load_frame(c, meshes, vdbs, frames.front(), warned);
-  seed_patches(*prev.query, prev.number, po, so, wo, set);
-  write_patches_ply(out_path(prev.number), set);
+  std::unique_ptr<Frame> prev = load_frame(c.source, frames.front());
+  seed_patches(*prev->surface, prev->number, po, so, wo, set);
+  write_patches_ply(out_path(prev->number), set);
   const std::size_t seeded = set.patches.size();
   Counts n = count(set, wo.delta_max);
-  progress.step(fmt::format("frame {}: seeded {} patches, {} vertices, median delta {:.3f}", prev.number, n.patches,
+  progress.step(fmt::format("frame {}: seeded {} patches, {} vertices, median delta {:.3f}", prev->number, n.patches,
                             n.vertices, n.median_delta));
   std::size_t removed_total = 0;
   for (std::size_t i = 1; i < frames.size(); ++i) {
-    Frame next = load_frame(c, meshes, vdbs, frames[i], warned);
-    ao.dt = double(next.number - prev.number) / c.fps;
-    const AdvectStats st = advect_patches(*next.query, prev.velocity, next.velocity, po, ao, wo, set);
+    std::unique_ptr<Frame> next = load_frame(c.source, frames[i]);
+    ao.dt = double(next->number - prev->number) / c.fps;
+    const AdvectStats st = advect_patches(*next->surface, prev->velocity, next->velocity, po, ao, set);
+    update_weights(next->mesh, po.radius, wo, set);
     removed_total += st.vertices_removed;
-    write_patches_ply(out_path(next.number), set);
+    write_patches_ply(out_path(next->number), set);
     n = count(set, wo.delta_max);
     progress.step(fmt::format("frame {}: {} patches alive ({} died), {} vertices ({} removed), median delta {:.3f}, "
                               "{:.1f}% triangles over delta-max, mean w {:.3f}",
-                              next.number, n.patches, st.patches_removed, n.vertices, st.vertices_removed,
+                              next->number, n.patches, st.patches_removed, n.vertices, st.vertices_removed,
                               n.median_delta, 100 * n.eroded, n.mean_weight));
     prev = std::move(next);
   }
@@ -166,16 +125,26 @@ void add_patches_command(CLI::App& app) {
       "patches",
       "Seed texture patches on the first frame and advect them through the sequence (no hole filling, no atlas);\n"
       "writes OUT/NAME.patches.%04d.ply with per-vertex patch_id, u, v, w to inspect in Houdini or Blender.");
-  cmd->add_option("--mesh", c->mesh_pattern, "Fluid mesh per frame: fluid.%04d.ply, fluid.####.ply, fluid.$F4.ply")
+  cmd->add_option("--mesh", c->source.mesh_pattern, "Fluid mesh per frame: fluid.%04d.ply, fluid.####.ply, fluid.$F4.ply")
       ->required();
   cmd->add_option("--frames", c->frames, "Frame range A-B (default: every frame found on disk)");
   cmd->add_option("--radius", c->radius, "Patch radius r in world units (the exemplar spans 2r)")->required();
   cmd->add_option("--out", c->out_dir, "Output folder")->required();
   cmd->add_option("--name", c->name, "Output file prefix (default: from the mesh pattern)");
-  cmd->add_option("--velocity-vdb", c->vdb_pattern, "OpenVDB velocity grid per frame (default: PLY vertex velocity)");
-  cmd->add_option("--velocity-grid", c->grid_name, "Grid name in the VDB files (default: vel, v, velocity)");
+  cmd->add_option("--velocity-vdb", c->source.velocity_vdb_pattern,
+                  "OpenVDB velocity grid per frame (default: PLY vertex velocity)");
+  cmd->add_option("--velocity-grid", c->source.velocity_grid, "Grid name in the VDB files (default: vel, v, velocity)");
+  cmd->add_flag("--allow-zero-velocity", c->source.allow_zero_velocity,
+                "Accept meshes without velocity (patches then only follow the surface by projection)");
+  cmd->add_option("--velocity-band", c->source.velocity_band,
+                  "Per-vertex velocity sampled on a band of this many voxels around the surface, as in the bake (0 = "
+                  "exact closest-point sampling)")
+      ->capture_default_str();
+  cmd->add_option("--velocity-voxel", c->source.velocity_voxel,
+                  "Voxel size of that band, in mean edge lengths of the frame's mesh")
+      ->capture_default_str();
   cmd->add_option("--fps", c->fps, "Frames per second (dt = 1/fps)")->capture_default_str();
-  cmd->add_option("--min-speed", c->min_speed, "Velocities slower than this (m/s) count as 0")->capture_default_str();
+  cmd->add_option("--min-speed", c->source.min_speed, "Velocities slower than this (m/s) count as 0")->capture_default_str();
   cmd->add_option("--spacing", c->spacing, "Poisson-disk distance of the seeds, in units of r")->capture_default_str();
   cmd->add_option("--delta-max", c->delta_max, "Distortion at which a triangle's quality reaches 0")
       ->capture_default_str();

@@ -8,6 +8,7 @@
 // of texels summed in chunk order, so results do not depend on the thread
 // count.
 #include "lapflow/addons/eval.hpp"
+#include "lapflow/bake/frame.hpp"
 
 #include <fmt/format.h>
 #include <sys/wait.h>
@@ -182,7 +183,7 @@ int channel_index(const std::vector<std::string>& names, const std::string& want
   throw InputError(path, "no channel '" + want + "'");
 }
 
-FrameData load_frame(const BakeManifest& m, int frame) {
+FrameData load_baked_frame(const BakeManifest& m, int frame) {
   FrameData f;
   f.frame = frame;
   const std::string obj = m.frame_file("obj", frame), color_path = m.frame_file("color", frame),
@@ -209,21 +210,21 @@ FrameData load_frame(const BakeManifest& m, int frame) {
   // Input velocities: the manifest's meshes (vertex i of the OBJ is vertex i
   // of the input mesh) or its VDB grids.
   const TriMesh& mesh = f.uv.mesh;
-  if (!m.velocity_vdb_pattern.empty()) {
-    f.grid = std::make_unique<VelocityGrid>(FramePattern(m.velocity_vdb_pattern).path(frame), m.velocity_grid);
+  FrameSource source;
+  source.mesh_pattern = m.mesh_pattern;
+  source.velocity_vdb_pattern = m.velocity_vdb_pattern;
+  source.velocity_grid = m.velocity_grid;
+  source.allow_zero_velocity = true;  // eval reads what the bake accepted; no velocity is zero velocity
+  FrameInput in = read_frame_input(source, frame);
+  if (in.grid) {
+    f.grid = std::move(in.grid);
   } else {
-    const std::string input = FramePattern(m.mesh_pattern).path(frame);
-    TriMesh in;
-    try {
-      in = read_mesh(input);
-    } catch (const InputError& e) {
-      throw e.with_frame(frame);
-    }
-    if (in.vertex_count() != mesh.vertex_count())
-      throw InputError(input, fmt::format("has {} vertices but the baked {} has {}: the input changed since the bake",
-                                          in.vertex_count(), fs::path(obj).filename().string(), mesh.vertex_count()),
+    if (in.mesh.vertex_count() != mesh.vertex_count())
+      throw InputError(in.path, fmt::format("has {} vertices but the baked {} has {}: the input changed since the bake",
+                                            in.mesh.vertex_count(), fs::path(obj).filename().string(),
+                                            mesh.vertex_count()),
                        frame);
-    f.vertex_velocity = std::move(in.velocities);  // empty: zero velocity (--allow-zero-velocity)
+    f.vertex_velocity = std::move(in.mesh.velocities);  // empty: zero velocity (--allow-zero-velocity)
   }
 
   // Chart texels exactly as the bake's atlas defines them, and per-triangle
@@ -836,7 +837,7 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   std::unique_ptr<FrameData> prev;
   for (const int frame : frames) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto cur = std::make_unique<FrameData>(load_frame(m, frame));
+    auto cur = std::make_unique<FrameData>(load_baked_frame(m, frame));
     FrameMetrics fm;
     fm.frame = frame;
     frame_metrics(*cur, exemplar, m.radius, o, fm);

@@ -1,26 +1,20 @@
-// The bake: one short frame loop over the stages (ALGORITHM.md steps 1-10).
+// The bake: the frame loop, one visible call per step of ALGORITHM.md.
 #include "lapflow/bake/bake.hpp"
 
 #include <malloc.h>
 #include <sys/resource.h>
 
-#include <chrono>
 #include <climits>
 #include <cmath>
-#include <exception>
 #include <filesystem>
-#include <future>
 #include <memory>
-#include <nlohmann/json.hpp>
 
-#include "lapflow/io/atomic_file.hpp"
+#include "bake/read_ahead.hpp"
+#include "bake/writer.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/mesh_io.hpp"
-#include "lapflow/core/parallel.hpp"
-#include "lapflow/surface/surface_query.hpp"
-#include "lapflow/io/uv_mesh.hpp"
-#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;
@@ -42,144 +36,17 @@ void keep_freed_memory_for_reuse() {
   mallopt(M_ARENA_MAX, 1);
 }
 
-namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-/// One frame's surface with everything sampled from it.
-struct SurfaceFrame {
-  int frame = 0;
-  std::string path;
-  TriMesh mesh;
-  std::unique_ptr<SurfaceQuery> query;
-  std::unique_ptr<VelocityGrid> grid;
-  VelocityField velocity;
-  std::string velocity_source;
-  /// Step 6, the frame's own atlas: it needs only the mesh, so it is built
-  /// with the read, ahead of the frame (BakeOptions::prefetch_read).
-  SurfaceAtlas atlas;
-  double seconds_atlas = 0;
-};
-
-std::unique_ptr<SurfaceFrame> load_frame(const BakeOptions& o, const FramePattern& meshes, int frame) {
-  auto s = std::make_unique<SurfaceFrame>();
-  s->frame = frame;
-  s->path = meshes.path(frame);
-  try {
-    s->mesh = read_mesh(s->path);
-  } catch (const InputError& e) {
-    throw e.with_frame(frame);
-  }
-  s->query = std::make_unique<SurfaceQuery>(s->mesh);
-  if (!o.velocity_vdb_pattern.empty()) {
-    const std::string vdb = FramePattern(o.velocity_vdb_pattern).path(frame);
-    try {
-      s->grid = std::make_unique<VelocityGrid>(vdb, o.velocity_grid);
-    } catch (const InputError& e) {
-      throw e.with_frame(frame);
-    }
-    s->velocity = grid_velocity_field(*s->grid);
-    s->velocity_source = "vdb:" + s->grid->grid_name();
-  } else if (s->mesh.has_velocities()) {
-    s->velocity = vertex_velocity_field(*s->query);
-    s->velocity_source = "vertex";
-    if (o.velocity_band > 0) {
-      s->velocity = banded_velocity_field(std::move(s->velocity), s->mesh, o.velocity_voxel * mean_edge_length(s->mesh),
-                                          o.velocity_band);
-      s->velocity_source = "vertex (band of " + std::to_string(o.velocity_band) + " voxels)";
-    }
-  } else if (s->mesh.empty() || o.allow_zero_velocity) {
-    s->velocity = [](const Vec3&) { return Vec3{}; };
-    s->velocity_source = "zero";
-  } else {
-    throw InputError(s->path,
-                     "no per-vertex velocity (vx vy vz) and no --velocity-vdb; pass --allow-zero-velocity to bake a "
-                     "still texture",
-                     frame);
-  }
-  if (o.min_speed > 0) s->velocity = with_min_speed(std::move(s->velocity), o.min_speed);
-  const auto t = Clock::now();
-  s->atlas = build_surface_atlas(s->mesh, o.atlas);
-  s->seconds_atlas = seconds_since(t);
-  return s;
+FrameSource frame_source(const BakeOptions& o) {
+  FrameSource source;
+  source.mesh_pattern = o.mesh_pattern;
+  source.velocity_vdb_pattern = o.velocity_vdb_pattern;
+  source.velocity_grid = o.velocity_grid;
+  source.min_speed = o.min_speed;
+  source.allow_zero_velocity = o.allow_zero_velocity;
+  source.velocity_band = o.velocity_band;
+  source.velocity_voxel = o.velocity_voxel;
+  return source;
 }
-
-nlohmann::json stats_json(const FrameStats& s) {
-  return {{"frame", s.frame},
-          {"triangles", s.triangles},
-          {"vertices", s.vertices},
-          {"velocity", s.velocity_source},
-          {"patches", {{"alive", s.patches_alive}, {"born", s.patches_born}, {"retired", s.patches_retired},
-                       {"lost", s.patches_lost}}},
-          {"patch_vertices_removed", s.patch_vertices_removed},
-          {"charts", s.charts},
-          {"utilization", s.utilization},
-          {"chart_texels", s.chart_texels},
-          {"coverage", s.coverage},
-          {"forced_texels", s.forced_texels},
-          {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"seed", s.seconds_seed},
-                       {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster}, {"write", s.seconds_write},
-                       {"total", s.seconds_total}}},
-          {"peak_rss_mb", s.peak_rss_mb}};
-}
-
-/// Everything one frame's files are made of, owned by the writer.
-struct FrameWrite {
-  FrameTextures textures;
-  SurfaceAtlas atlas;
-  std::shared_ptr<const SurfaceFrame> surface;
-  PatchSet patches;  ///< a copy, with dump_patches only
-};
-
-/// Writes frame f's files, each atomically. Returns the seconds it took.
-double write_frame(const BakeOptions& o, const BakeManifest& names, const FrameWrite& w, int f) {
-  const auto t = Clock::now();
-  const std::string color = names.frame_file("color", f), disp = names.frame_file("disp", f);
-  std::vector<std::function<void()>> jobs;
-  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
-  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
-  if (o.aov)
-    jobs.push_back([&] {
-      // Data: float, and never lossy.
-      const ExrCompression lossless =
-          o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
-      write_exr(names.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
-                {ExrPixelType::Float, lossless});
-    });
-  jobs.push_back([&] {
-    UvMeshMaterial material;
-    material.name = o.name;
-    material.color_texture = fs::path(color).filename().string();
-    material.displacement_texture = fs::path(disp).filename().string();
-    write_uv_mesh_obj(names.frame_file("obj", f), w.surface->mesh, w.atlas, material);
-  });
-  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names.frame_file("patches", f), w.patches); });
-  if (o.background_write) {
-    // One after the other on this thread (OpenEXR compresses on its own
-    // pool): the writer must not take the TBB workers the next frame needs.
-    for (const auto& job : jobs) job();
-    return seconds_since(t);
-  }
-  // Nothing else runs: the files are written concurrently (OIIO converts
-  // each image on one thread). Each job keeps its own error; the first in
-  // job order is rethrown.
-  std::vector<std::exception_ptr> errors(jobs.size());
-  parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      try {
-        jobs[i]();
-      } catch (...) {
-        errors[i] = std::current_exception();
-      }
-    }
-  }, 1);
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
-  return seconds_since(t);
-}
-
-}  // namespace
 
 void resolve_bake_options(BakeOptions& o) {
   if (o.mesh_pattern.empty()) throw UsageError("--mesh is required (a per-frame PLY/OBJ pattern)");
@@ -221,6 +88,28 @@ void resolve_bake_options(BakeOptions& o) {
   o.raster.gutter = o.atlas.gutter;
 }
 
+namespace {
+
+/// The counts of a frame that its stages leave in the frame and the patches.
+void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats& st) {
+  st.frame = frame.number;
+  st.triangles = frame.mesh.triangle_count();
+  st.vertices = frame.mesh.vertex_count();
+  st.velocity_source = frame.velocity_source;
+  st.charts = frame.atlas.chart_count;
+  st.utilization = frame.atlas.report.utilization;
+  const RasterStats& r = frame.raster.stats;
+  st.seconds_raster = st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_retire + st.seconds_dilate;
+  st.patches_born += r.patches_born;
+  st.patches_retired = r.patches_retired;
+  st.patches_alive = patches.patches.size();
+  st.chart_texels = r.chart_texels;
+  st.forced_texels = r.forced_texels;
+  st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
+}
+
+}  // namespace
+
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
@@ -229,118 +118,74 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   std::error_code ec;
   fs::create_directories(o.out_dir, ec);
   if (ec) throw OutputError(o.out_dir + ": cannot create the output folder: " + ec.message());
-
-  PatchSet patches;
-  std::shared_ptr<SurfaceFrame> prev;
-  std::string stats_text;
-  const std::string stats_path = (fs::path(o.out_dir) / (o.name + ".stats.jsonl")).string();
   // The manifest also names every output file (BakeManifest::frame_file).
   const BakeManifest manifest = make_bake_manifest(o, frames);
   write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
 
-  // The frame being written in the background, if any.
-  std::future<double> pending;
-  FrameStats pending_stats;
-  double loop_seconds = 0;  // wall time of the frame loop iteration that computed the pending frame
-  auto finish_pending = [&] {
-    if (!pending.valid()) return;
-    const auto t_wait = Clock::now();
-    pending_stats.seconds_write = pending.get();  // rethrows a write error
-    // Wall time the frame cost the bake: its computation plus the wait for
-    // its files beyond the next frame's computation (frames sum to the bake).
-    pending_stats.seconds_total = loop_seconds + seconds_since(t_wait);
-    pending_stats.peak_rss_mb = peak_rss_mb();
-    stats_text += stats_json(pending_stats).dump() + "\n";
-    write_text_atomically(stats_path, stats_text);
-    if (on_frame) on_frame(pending_stats);
-  };
-
+  detail::FrameReader reader(frame_source(o), o.atlas, frames, o.prefetch_read);
+  detail::FrameWriter writer(o, manifest, on_frame);
+  PatchSet patches;  // the state that carries over from frame to frame
+  std::shared_ptr<const Frame> prev;
   try {
-    // The next frame is read (mesh, Embree scene, velocity band) on another
-    // thread while this one computes; its errors surface in frame order.
-    std::future<std::shared_ptr<SurfaceFrame>> next;
-    auto start_reading = [&](std::size_t i) {
-      if (i < frames.size())
-        next = std::async(o.prefetch_read ? std::launch::async : std::launch::deferred, [&o, &meshes, f = frames[i]] {
-          return std::shared_ptr<SurfaceFrame>(load_frame(o, meshes, f));
-        });
-    };
-    start_reading(0);
-    for (std::size_t i = 0; i < frames.size(); ++i) {
-      const int f = frames[i];
-      if (!o.prefetch_read && i > 0) start_reading(i);
-      FrameStats st;
-      st.frame = f;
-      const auto t_frame = Clock::now();
-      auto t = Clock::now();
-      std::shared_ptr<SurfaceFrame> cur = next.get();
-      if (o.prefetch_read) start_reading(i + 1);
-      st.seconds_read = seconds_since(t);  // the wait for the frame read in the background
-      st.triangles = cur->mesh.triangle_count();
-      st.vertices = cur->mesh.vertex_count();
-      st.velocity_source = cur->velocity_source;
+    for (std::size_t left = frames.size(); left > 0; --left) {
+      Stopwatch frame_clock, clock;
+      // Read ahead: mesh, surface query, velocity, and step 6, the frame's
+      // own atlas (it needs only the mesh).
+      const std::shared_ptr<Frame> frame = reader.next();
+      Frame& cur = *frame;
+      FrameStats& st = cur.stats;
+      st.seconds_read = clock.lap();
 
-      // Steps 1-5: patches follow the flow (or are seeded on the first frame and
-      // after the liquid vanished).
-      const std::size_t before = patches.patches.size();
       if (prev && !patches.patches.empty()) {
-        t = Clock::now();
+        // Step 4: the patches follow the flow onto this frame's surface.
         AdvectOptions advect = o.advect;
-        advect.dt = double(f - prev->frame) / o.fps;
-        const AdvectStats a =
-            advect_patches(*cur->query, prev->velocity, cur->velocity, o.patch, advect, o.weights, patches);
+        advect.dt = double(cur.number - prev->number) / o.fps;
+        const AdvectStats a = advect_patches(*cur.surface, prev->velocity, cur.velocity, o.patch, advect, patches);
         st.patches_lost = a.patches_removed;
         st.patch_vertices_removed = a.vertices_removed;
-        st.seconds_advect = seconds_since(t);
+        st.seconds_advect = clock.lap();
+        // Step 5.
+        update_weights(cur.mesh, o.patch.radius, o.weights, patches);
+        st.seconds_weights = clock.lap();
       }
-      if (patches.patches.empty() && !cur->mesh.empty()) {
-        t = Clock::now();
-        seed_patches(*cur->query, f, o.patch, o.seeding, o.weights, patches);
+      if (patches.patches.empty() && !cur.mesh.empty()) {
+        // Steps 1-3 on the first frame, and after the liquid vanished.
+        seed_patches(*cur.surface, cur.number, o.patch, o.seeding, o.weights, patches);
         st.patches_born += patches.patches.size();
-        st.seconds_seed = seconds_since(t);
+        st.seconds_seed = clock.lap();
       }
-      (void)before;
 
-      // Step 6: the frame's own atlas, built with the read (its time, which
-      // overlapped the previous frame unless this is the first).
-      SurfaceAtlas atlas = std::move(cur->atlas);
-      st.seconds_atlas = cur->seconds_atlas;
-      st.charts = atlas.chart_count;
-      st.utilization = atlas.report.utilization;
+      // Step 7: lapped rasterization, the oldest non-eroded patch per texel.
+      cur.raster = begin_raster(cur.mesh, cur.atlas, textures, o.raster, o.weights,
+                                surface_triangle_locator(*cur.surface, o.raster.radius));
+      draw_patches(cur.raster, patches);
+      st.seconds_draw = clock.lap();
+      // Step 8: new patches at the holes' centres.
+      const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
+      fill_holes(cur.raster, patches, cur.number,
+                 surface_patch_maker(*cur.surface, adjacency, o.patch, o.weights, cur.number));
+      st.seconds_holes = clock.lap();
+      // Each texel's colour and displacement from its patch.
+      cur.textures = resolve_texels(cur.raster, patches);
+      st.seconds_resolve = clock.lap();
+      // Step 9.
+      retire_patches(cur.raster, patches);
+      st.seconds_retire = clock.lap();
+      dilate_gutter(cur.raster, cur.textures);
+      st.seconds_dilate = clock.lap();
 
-      // Steps 7-9: lapped rasterization, hole filling, retirement.
-      t = Clock::now();
-      FrameTextures tex = rasterize_atlas(*cur->query, atlas, textures, o.raster, o.patch, o.weights, f, patches);
-      st.seconds_raster = seconds_since(t);
-      st.patches_born += tex.stats.patches_born;
-      st.patches_retired = tex.stats.patches_retired;
-      st.patches_alive = patches.patches.size();
-      st.chart_texels = tex.stats.chart_texels;
-      st.forced_texels = tex.stats.forced_texels;
-      st.coverage = tex.stats.chart_texels ? double(tex.stats.covered_texels) / double(tex.stats.chart_texels) : 1.0;
-
-      // Step 10: write the frame, every file atomically, on a writer thread
-      // while the next frame computes. The frame's data moves to the writer;
-      // its stats line and on_frame follow when its files are all on disk.
-      auto job = std::make_shared<FrameWrite>();
-      job->textures = std::move(tex);
-      job->atlas = std::move(atlas);
-      job->surface = cur;
-      if (o.dump_patches) job->patches = patches;
-      const double compute_seconds = seconds_since(t_frame);
-      finish_pending();  // at most one frame in flight: bounds memory to two frames of images
-      pending_stats = st;
-      loop_seconds = compute_seconds;
-      pending = std::async(std::launch::async, [&o, &manifest, job, f] { return write_frame(o, manifest, *job, f); });
-      if (!o.background_write) finish_pending();
-      prev = std::move(cur);
+      // Step 10: the frame's files, each atomically; its stats line follows
+      // when they are all on disk.
+      record_frame_stats(cur, patches, st);
+      writer.write(frame, patches, frame_clock.total());
+      prev = frame;
     }
-    finish_pending();
+    writer.finish();
   } catch (...) {
     // A bad frame stops the bake; the frame already computed is still written
     // in full (its files and stats line), then the error goes up.
     try {
-      finish_pending();
+      writer.finish();
     } catch (...) {
     }
     throw;

@@ -5,8 +5,7 @@
 // velocities just vanish), answers a malformed file with a bare `false`, and
 // builds a halfedge structure we never use. This reader parses straight into
 // flat arrays, accepts every PLY scalar type and list layout, and every
-// failure names the file, the element and its index. Parsing a 20k-triangle
-// binary frame takes about a millisecond.
+// failure names the file, the element and its index.
 #include "lapflow/io/mesh_io.hpp"
 
 #include <bit>

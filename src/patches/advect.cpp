@@ -36,8 +36,7 @@ struct Moved {
 }  // namespace
 
 AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev, const VelocityField& v_next,
-                           const PatchOptions& patch_options, const AdvectOptions& options,
-                           const WeightOptions& weights, PatchSet& patches) {
+                           const PatchOptions& patch_options, const AdvectOptions& options, PatchSet& patches) {
   AdvectStats stats;
   const double r = patch_options.radius, dt = options.dt;
   const double max_proj = options.max_projection * r;
@@ -180,7 +179,6 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
         patch.surface_triangle = std::move(st);
         patch.triangles = std::move(tris);
       }
-      if (patch.alive()) patch_weights(mesh, r, weights, patch);
     }
   }, 8);
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "lapflow/core/parallel.hpp"
 #include "lapflow/patches/patches.hpp"
 #include "patches/internal.hpp"
 
@@ -108,6 +109,12 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
     patch.border[v] = (!on_boundary[v] || near_centre) ? 1 : 0;
     patch.weight[v] = patch.quality[v] * float(patch.border[v]);
   }
+}
+
+void update_weights(const TriMesh& surface, double radius, const WeightOptions& options, PatchSet& patches) {
+  parallel_for(patches.patches.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) patch_weights(surface, radius, options, patches.patches[i]);
+  }, 8);
 }
 
 }  // namespace lapflow

@@ -3,15 +3,16 @@
 // smallest key (patch index << 32 | triangle) whose erosion test passes, by an
 // atomic min, so the winner is the oldest non-eroded patch whatever the
 // drawing order or thread count. A resolve pass then samples the exemplar for
-// each texel's winner; hole filling, retirement and gutter dilation follow.
+// each texel's winner (resolve_texels); retirement and gutter dilation are
+// here too; hole filling (fill_holes) is in holes.cpp.
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <climits>
 #include <cmath>
 #include <stdexcept>
 
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/core/stopwatch.hpp"
 #include "lapflow/raster/raster.hpp"
 #include "raster/internal.hpp"
 #include "raster/sampling.hpp"
@@ -19,9 +20,6 @@
 namespace lapflow {
 namespace detail {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Atlas pixel coordinates of 3D point p through fluid triangle `tri`'s affine
 // map (p projected on the triangle's plane, barycentrics unclamped so points
@@ -211,9 +209,9 @@ void setup_context(RasterContext& ctx) {
   ctx.N = atlas.resolution;
   const std::size_t nt = mesh.triangles.size();
   if (atlas.corner_uv.size() != nt * 3 || atlas.chart_of_triangle.size() != nt)
-    throw std::invalid_argument("rasterize_atlas: the atlas does not belong to this mesh");
+    throw std::invalid_argument("rasterize: the atlas does not belong to this mesh");
   const std::size_t NN = std::size_t(ctx.N) * ctx.N;
-  if (NN >= (std::size_t(1) << 31)) throw std::invalid_argument("rasterize_atlas: atlas resolution above 46340");
+  if (NN >= (std::size_t(1) << 31)) throw std::invalid_argument("rasterize: atlas resolution above 46340");
   const TexelMap& tm = atlas.texels;
   ctx.index.assign(NN, -1);
   parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
@@ -576,21 +574,22 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int tex
 
 using namespace detail;
 
-FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                              const RasterOptions& options, const WeightOptions& weights, int frame,
-                              const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches) {
-  const auto t_start = Clock::now();
-  if (!(options.radius > 0)) throw std::invalid_argument("rasterize_atlas: radius must be positive");
-  if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize_atlas: exemplar not prepared");
-  FrameTextures out;
-  RasterStats& st = out.stats;
-  RasterContext ctx(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
-  ctx.locate = locate ? &locate : nullptr;
+RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate) {
+  if (!(options.radius > 0)) throw std::invalid_argument("rasterize: radius must be positive");
+  if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize: exemplar not prepared");
+  RasterBuffers r;
+  r.context = std::make_shared<RasterContext>(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
+  RasterContext& ctx = *r.context;
+  ctx.options = options;
+  ctx.exemplar = &exemplar;
+  ctx.locate_fn = std::move(locate);
+  ctx.locate = ctx.locate_fn ? &ctx.locate_fn : nullptr;
   ctx.radius = options.radius;
   setup_context(ctx);
   const int N = ctx.N;
-  const TexelMap& tm = atlas.texels;
-  st.chart_texels = tm.size();
+  RasterStats& st = r.stats;
+  st.chart_texels = atlas.texels.size();
 
   // Exemplar level of detail: one atlas texel spans texel_world_size / (2r)
   // of the patch's uv square.
@@ -608,21 +607,23 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
   const Image& base = exemplar.mips.levels[0];
   const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
   st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
-  const bool blend = options.mode == RasterMode::Blend;
-  if (blend) {
+  if (options.mode == RasterMode::Blend) {
     ctx.blend.mips = &exemplar.mips;
     ctx.blend.lod = st.lod;
     ctx.blend.trilinear = options.trilinear;
-    ctx.blend.sums.assign(tm.size() * 5, 0);
-    ctx.blend.best.assign(tm.size(), 0);
-    ctx.blend.contributed.assign(patches.patches.size(), 0);
+    ctx.blend.sums.assign(atlas.texels.size() * 5, 0);
+    ctx.blend.best.assign(atlas.texels.size(), 0);
   }
-  st.seconds_setup = seconds_since(t_start);
+  return r;
+}
 
-  // Pass 1: every patch triangle, any order (the atomic min decides).
-  auto t0 = Clock::now();
+void draw_patches(RasterBuffers& r, const PatchSet& patches) {
+  RasterContext& ctx = *r.context;
+  RasterStats& st = r.stats;
   const std::size_t np = patches.patches.size();
-  if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize_atlas: too many patches");
+  if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize: too many patches");
+  if (ctx.mode == RasterMode::Blend) ctx.blend.contributed.assign(np, 0);
+  // Every patch triangle, any order (the atomic min decides).
   std::vector<RasterCounters> counters(np);
   // All threads go through the patches from the oldest to the youngest, a
   // few at a time, so a texel's keeper is usually drawn before the younger
@@ -643,41 +644,21 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     st.seam_triangles += c.seam_triangles;
     st.distorted_triangles += c.distorted_triangles;
   }
-  st.seconds_raster = seconds_since(t0);
+}
 
-  // Step 8.
-  t0 = Clock::now();
-  if (blend) blend_mark_coverage(ctx);
-  if (options.fill_holes && make_patch) st.patches_born = fill_holes(ctx, patches, frame, make_patch, options.max_hole_patches);
-  st.seconds_holes = seconds_since(t0);
-  if (blend) {
-    // The AOV winners (largest weight, ties to the oldest): a second raster
-    // pass now that every texel's maximum is known (timed with the raster).
-    t0 = Clock::now();
-    std::fill(ctx.keys.begin(), ctx.keys.end(), kNoKey);
-    ctx.blend.phase = 2;
-    parallel_for(patches.patches.size(), [&](std::size_t b, std::size_t e) {
-      RasterCounters unused;
-      for (std::size_t p = b; p < e; ++p) rasterize_patch(ctx, patches.patches[p], p, unused);
-    }, 1);
-    st.seconds_raster += seconds_since(t0);
-  }
-  // Texels hole filling could not reach (create_patch failed there, or the
-  // newborn does not keep its own centre) still need a patch: they take a
-  // covered neighbour's winner within their chart, and in charts with none,
-  // the nearest patch triangle in 3D. Counted in forced_texels. Without hole
-  // filling the holes are left visible (alpha 0).
-  t0 = Clock::now();
-  if (options.fill_holes) {
-    st.forced_texels = propagate_keys(ctx);
-    st.forced_texels += cover_from_nearest_patch(ctx, patches);
-  }
-  st.seconds_holes += seconds_since(t0);
-
-  // Resolve: the winner's (u, v, w) at the texel centre, then E and H.
-  t0 = Clock::now();
-  // The three images are allocated (zero-filled, page by page: 1.35 GB at
-  // 6144^2, most of a second on one core) on both cores at once.
+FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
+  RasterContext& ctx = *r.context;
+  RasterStats& st = r.stats;
+  const RasterOptions& options = ctx.options;
+  const RasterExemplar& exemplar = *ctx.exemplar;
+  const SurfaceAtlas& atlas = ctx.atlas;
+  const TexelMap& tm = atlas.texels;
+  const int N = ctx.N;
+  const bool blend = options.mode == RasterMode::Blend;
+  FrameTextures out;
+  // The winner's (u, v, w) at the texel centre, then E and H.
+  // The three images are allocated (zero-filled, page by page) on both
+  // cores at once.
   parallel_for(3, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
       if (k == 0) out.color = Image(N, N, 4);
@@ -781,14 +762,24 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     st.covered_texels = 0;
     for (std::size_t c : covered) st.covered_texels += c;
   }
-  st.seconds_resolve = seconds_since(t0);
+  r.texels_won.resize(won.size());
+  for (std::size_t p = 0; p < won.size(); ++p) r.texels_won[p] = won[p].load(std::memory_order_relaxed);
+  return out;
+}
 
-  // Step 9, after hole filling so a newborn patch that covered nothing goes too.
-  const bool retire = options.retire && options.mode != RasterMode::NoErosion;
+void retire_patches(RasterBuffers& r, PatchSet& patches) {
+  const RasterContext& ctx = *r.context;
+  RasterStats& st = r.stats;
+  if (r.texels_won.size() != patches.patches.size())
+    throw std::invalid_argument("retire_patches: resolve_texels first, on the same patches");
+  const bool blend = ctx.options.mode == RasterMode::Blend;
+  // After hole filling, so a newborn patch that covered nothing goes too.
+  const bool retire = ctx.options.retire && ctx.options.mode != RasterMode::NoErosion;
   std::vector<Patch> kept;
   kept.reserve(patches.patches.size());
+  st.texels_per_patch.clear();
   for (std::size_t p = 0; p < patches.patches.size(); ++p) {
-    const uint64_t n = won[p].load(std::memory_order_relaxed);
+    const uint64_t n = r.texels_won[p];
     // Blend: a patch that gave weight to no texel retires, unless a forced
     // texel names it.
     if (retire && n == 0 && (!blend || ctx.blend.contributed[p] == 0)) {
@@ -799,12 +790,18 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     st.texels_per_patch.push_back(n);
   }
   patches.patches = std::move(kept);
+  r.texels_won = st.texels_per_patch;
+}
 
-  // Gutter dilation: every pixel outside the charts copies its nearest chart
-  // pixel's colour (alpha stays 0), displacement and AOV.
-  t0 = Clock::now();
+void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
+  RasterContext& ctx = *r.context;
+  const RasterOptions& options = ctx.options;
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  // Every pixel outside the charts copies its nearest chart pixel's colour
+  // (alpha stays 0), displacement and AOV.
   if (options.dilate && tm.size() > 0) {
-    std::vector<int32_t>& source = ctx.index;  // reused: no longer needed
+    std::vector<int32_t>& source = ctx.index;  // reused: the raster steps are done with it
     parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) source[i] = source[i] >= 0 ? int32_t(i) : -1;
     }, 1 << 16);
@@ -824,8 +821,28 @@ FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, co
     for (std::size_t i = 0; i < ctx.index.size(); ++i)
       if (ctx.index[i] < 0) out.aov.pixels[i * 4] = -1.f;
   }
-  st.seconds_dilate = seconds_since(t0);
-  st.seconds_total = seconds_since(t_start);
+  // Dilation reuses the pixel index: the buffers are spent.
+  r.context.reset();
+}
+
+FrameTextures raster_frame(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const WeightOptions& weights, int frame,
+                           const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches) {
+  Stopwatch clock;
+  RasterBuffers r = begin_raster(mesh, atlas, exemplar, options, weights, locate);
+  RasterStats& st = r.stats;
+  st.seconds_setup = clock.lap();
+  draw_patches(r, patches);
+  st.seconds_raster = clock.lap();
+  fill_holes(r, patches, frame, make_patch);
+  st.seconds_holes = clock.lap();
+  FrameTextures out = resolve_texels(r, patches);
+  st.seconds_resolve = clock.lap();
+  retire_patches(r, patches);
+  dilate_gutter(r, out);
+  st.seconds_dilate = clock.lap();
+  st.seconds_total = clock.total();
+  out.stats = std::move(r.stats);
   return out;
 }
 

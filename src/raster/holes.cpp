@@ -78,8 +78,8 @@ std::vector<uint32_t> uncovered_texels(const RasterContext& ctx, Also&& also) {
 
 }  // namespace
 
-std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
-                       std::size_t max_patches) {
+std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
+                                std::size_t max_patches) {
   const TexelMap& tm = ctx.atlas.texels;
   const int N = ctx.N;
   std::size_t born = 0;
@@ -283,3 +283,38 @@ std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches
 }
 
 }  // namespace lapflow::detail
+
+namespace lapflow {
+
+using namespace detail;
+
+void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker& make_patch) {
+  RasterContext& ctx = *r.context;
+  RasterStats& st = r.stats;
+  const RasterOptions& options = ctx.options;
+  const bool blend = options.mode == RasterMode::Blend;
+  if (blend) blend_mark_coverage(ctx);
+  if (options.fill_holes && make_patch)
+    st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches);
+  if (blend) {
+    // The AOV winners (largest weight, ties to the oldest): a second raster
+    // pass now that every texel's maximum is known.
+    std::fill(ctx.keys.begin(), ctx.keys.end(), kNoKey);
+    ctx.blend.phase = 2;
+    parallel_for(patches.patches.size(), [&](std::size_t b, std::size_t e) {
+      RasterCounters unused;
+      for (std::size_t p = b; p < e; ++p) rasterize_patch(ctx, patches.patches[p], p, unused);
+    }, 1);
+  }
+  // Texels hole filling could not reach (create_patch failed there, or the
+  // newborn does not keep its own centre) still need a patch: they take a
+  // covered neighbour's winner within their chart, and in charts with none,
+  // the nearest patch triangle in 3D. Counted in forced_texels. Without hole
+  // filling the holes are left visible (alpha 0).
+  if (options.fill_holes) {
+    st.forced_texels += propagate_keys(ctx);
+    st.forced_texels += cover_from_nearest_patch(ctx, patches);
+  }
+}
+
+}  // namespace lapflow

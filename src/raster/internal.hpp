@@ -1,6 +1,8 @@
 #pragma once
-// Shared state of one rasterize_atlas call, split across rasterize_atlas.cpp
-// (setup, raster and resolve passes), hole_filling.cpp and gutter_dilation.cpp.
+// The state behind RasterBuffers: one frame's lapped rasterization, carried
+// through the steps of raster.hpp (draw.cpp: set-up, draw, resolve, retire,
+// dilate; holes.cpp: hole filling; blend.cpp: Blend mode; dilate.cpp: the
+// gutter's source map).
 #include <atomic>
 #include <cstdint>
 #include <limits>
@@ -54,7 +56,10 @@ struct RasterContext {
   const ErosionMap& erosion;
   RasterMode mode;
   double delta_max;
-  const TriangleLocator* locate = nullptr;
+  RasterOptions options;
+  const RasterExemplar* exemplar = nullptr;
+  TriangleLocator locate_fn;                ///< owned copy of the caller's locator (may be empty)
+  const TriangleLocator* locate = nullptr;  ///< &locate_fn when it is set
   double radius = 0.1;  ///< r (metres)
   int N = 0;
   /// Texel-map index of every atlas pixel y * N + x, -1 outside charts.
@@ -111,8 +116,8 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texe
 /// Step 8: new patches at the centres of the holes (open chart texels,
 /// 8-connected within a chart), in rounds of seeds 2r apart created in
 /// parallel, each drawn into the still-open texels. Returns patches born.
-std::size_t fill_holes(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
-                       std::size_t max_patches);
+std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
+                                std::size_t max_patches);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same
 /// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
 std::size_t propagate_keys(RasterContext& ctx);

@@ -1,8 +1,8 @@
 // A velocity field sampled once per frame on a narrow band of voxels around
 // the surface, then read trilinearly. Advection samples velocities tens of
 // millions of times per frame; each exact per-vertex sample is an Embree
-// closest-point query (about a microsecond), a voxel lookup is a few dozen
-// nanoseconds. The band is built from the exact field, so it converges to it
+// closest-point query, a voxel lookup is orders of magnitude cheaper
+// (docs/performance.md). The band is built from the exact field, so it converges to it
 // as the voxel shrinks; points outside the band fall back to the exact field.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Morphology.h>
@@ -26,7 +26,7 @@ namespace {
 // values at its cells' corners (a one-voxel apron shared with the next
 // bricks), so the 8 corners of a trilinear sample are in one brick and a
 // sample costs one index computation and 8 loads. (An OpenVDB accessor walks
-// its tree per corner: this was 3 to 5 times slower per sample.)
+// its tree per corner: several times slower per sample.)
 constexpr int kBrick = 8, kSide = kBrick + 1, kBrickValues = kSide * kSide * kSide;
 
 struct Vec3s {

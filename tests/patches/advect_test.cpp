@@ -80,8 +80,9 @@ RigidRun run_rigid(int frames, const PatchOptions& po, double omega = 1.5) {
   for (int f = 1; f <= frames; ++f) {
     auto next_mesh = std::make_unique<TriMesh>(s.mesh(f));
     auto next_query = std::make_unique<SurfaceQuery>(*next_mesh);
-    const AdvectStats st = advect_patches(*next_query, s.velocity((f - 1) / 24.0), s.velocity(f / 24.0), po, ao, {},
-                                          run.patches);
+    const AdvectStats st =
+        advect_patches(*next_query, s.velocity((f - 1) / 24.0), s.velocity(f / 24.0), po, ao, run.patches);
+    update_weights(next_query->mesh(), po.radius, {}, run.patches);
     run.removed += st.vertices_removed;
     run.max_residual = std::max(run.max_residual, st.max_residual);
     query = std::move(next_query);
@@ -174,7 +175,10 @@ TEST(PatchesAdvect, SimpleShearMatchesTheAnalyticDistortion) {
   ao.dt = 1.0 / 24;
   const int frames = 12;
   std::size_t removed = 0;
-  for (int f = 1; f <= frames; ++f) removed += advect_patches(q, shear, shear, po, ao, {}, set).vertices_removed;
+  for (int f = 1; f <= frames; ++f) {
+    removed += advect_patches(q, shear, shear, po, ao, set).vertices_removed;
+    update_weights(q.mesh(), po.radius, {}, set);
+  }
   EXPECT_EQ(removed, 0u);
   const double k = g * frames * ao.dt;
   const double s1 = std::sqrt((2 + k * k + k * std::sqrt(k * k + 4)) / 2);
@@ -209,7 +213,7 @@ TEST(PatchesAdvect, VerticesThatLeaveTheSurfaceAreRemoved) {
   }
   const PatchSet start = set;
   const VelocityField still = [](const Vec3&) { return Vec3{}; };
-  const AdvectStats st = advect_patches(q1, still, still, po, {}, {}, set);
+  const AdvectStats st = advect_patches(q1, still, still, po, {}, set);
   ASSERT_EQ(set.patches.size(), 2u);  // the droplet's patch is gone
   EXPECT_EQ(st.patches_removed, 1u);
   EXPECT_EQ(set.patches[0].id, 0u);
@@ -270,7 +274,10 @@ TEST(PatchesAdvect, StillnessIsBitForBit) {
   seed_patches(q, 0, po, {}, {}, set);
   const VelocityField still = [](const Vec3&) { return Vec3{}; };
   PatchSet moved = set;
-  for (int f = 0; f < 3; ++f) advect_patches(q, still, still, po, {}, {}, moved);
+  for (int f = 0; f < 3; ++f) {
+    advect_patches(q, still, still, po, {}, moved);
+    update_weights(q.mesh(), po.radius, {}, moved);
+  }
   ASSERT_EQ(moved.patches.size(), set.patches.size());
   for (std::size_t i = 0; i < set.patches.size(); ++i) {
     EXPECT_EQ(moved.patches[i].positions, set.patches[i].positions);
@@ -307,7 +314,8 @@ RigidRun run_rigid_vertex_velocity(int frames, const PatchOptions& po, bool wrap
       prev = [p = prev](const Vec3& x) { return p(x); };
       next = [n = next](const Vec3& x) { return n(x); };
     }
-    const AdvectStats st = advect_patches(*next_query, prev, next, po, ao, {}, run.patches);
+    const AdvectStats st = advect_patches(*next_query, prev, next, po, ao, run.patches);
+    update_weights(next_query->mesh(), po.radius, {}, run.patches);
     run.removed += st.vertices_removed;
     run.max_residual = std::max(run.max_residual, st.max_residual);
     query = std::move(next_query);

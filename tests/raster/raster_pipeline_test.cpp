@@ -86,7 +86,7 @@ TEST(RasterPipeline, SphereFullCoverageOnePatchPerTexelOldestFirst) {
   PatchSet patches = sc.seeded(q);
   ASSERT_GT(patches.patches.size(), 20u);
   const std::size_t seeded = patches.patches.size();
-  const FrameTextures out = rasterize_atlas(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+  const FrameTextures out = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
   const RasterStats& st = out.stats;
   ASSERT_EQ(st.chart_texels, sc.atlas.texels.size());
   EXPECT_EQ(st.covered_texels, st.chart_texels);
@@ -131,9 +131,9 @@ TEST(RasterPipeline, StillSurfaceGivesIdenticalFramesAndOneAndTwoThreadsAgree) {
   auto bake = [&](int threads) {
     set_thread_count(threads);
     PatchSet patches = sc.seeded(q);
-    FrameTextures f0 = rasterize_atlas(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+    FrameTextures f0 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
     // Zero velocity, same mesh: frame 1 rasterizes the same patches again.
-    FrameTextures f1 = rasterize_atlas(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+    FrameTextures f1 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
     set_thread_count(0);
     return std::make_pair(std::move(f0), std::move(f1));
   };
@@ -181,7 +181,7 @@ TEST(RasterPipeline, DamBreakFrameFullCoverage) {
     RasterOptions ro;
     ro.radius = popt.radius;
     ro.mode = mode;
-    const FrameTextures out = rasterize_atlas(q, atlas, rex, ro, popt, wopt, 40, patches);
+    const FrameTextures out = raster_frame(q, atlas, rex, ro, popt, wopt, 40, patches);
     EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
     EXPECT_LE(out.stats.forced_texels, out.stats.chart_texels / 1000);
     EXPECT_LT(out.stats.patches_born, patches.patches.size());

@@ -107,7 +107,7 @@ struct Scene {
   }
   FrameTextures run(RasterOptions o, bool holes = true) {
     o.radius = r;
-    return rasterize_atlas(f.mesh, f.atlas, rex, o, WeightOptions{}, 0, holes ? maker() : PatchMaker{},
+    return raster_frame(f.mesh, f.atlas, rex, o, WeightOptions{}, 0, holes ? maker() : PatchMaker{},
                            TriangleLocator{}, patches);
   }
   const PatchSpec& spec(uint32_t id) const {
@@ -459,7 +459,7 @@ TEST(Raster, RejectsAnAtlasOfAnotherMesh) {
   o.radius = sc.r;
   for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
     o.mode = mode;
-    EXPECT_THROW(rasterize_atlas(sc.f.mesh, wrong, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
+    EXPECT_THROW(raster_frame(sc.f.mesh, wrong, sc.rex, o, WeightOptions{}, 0, {}, {}, sc.patches),
                  std::invalid_argument);
   }
 }
@@ -493,7 +493,7 @@ TEST(Raster, ChartNoPatchReachesTakesTheNearestPatch) {
     RasterOptions o;
     o.mode = mode;
     o.radius = 0.15;
-    const FrameTextures out = rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0,
+    const FrameTextures out = raster_frame(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0,
                                               [](const SurfacePoint&, uint32_t) { return std::optional<Patch>{}; },
                                               TriangleLocator{}, sc.patches);
     const RasterStats& st = out.stats;
@@ -520,7 +520,7 @@ TEST(Raster, NewbornsThatKeepNothingStillCoverTheirHoles) {
   RasterOptions o;
   o.radius = sc.r;
   const FrameTextures out =
-      rasterize_atlas(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, folded, TriangleLocator{}, sc.patches);
+      raster_frame(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, folded, TriangleLocator{}, sc.patches);
   EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
   EXPECT_EQ(out.stats.forced_texels, out.stats.chart_texels);
   EXPECT_GT(out.stats.patches_born, 0u);

@@ -1,5 +1,5 @@
 #pragma once
-/// \file pipeline.hpp The bake: the whole frame loop over one per-frame state
+/// \file bake.hpp The bake: the whole frame loop over one per-frame state
 /// (ALGORITHM.md steps 1-10). The CLI and the scene file fill BakeOptions.
 #include <cstdint>
 #include <functional>
@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/bake/frame.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/patches/patches.hpp"
@@ -53,26 +54,8 @@ struct BakeOptions {
   RasterOptions raster;
 };
 
-/// Statistics of one baked frame (one line of NAME.stats.jsonl).
-struct FrameStats {
-  int frame = 0;
-  std::size_t triangles = 0, vertices = 0;
-  std::size_t patches_alive = 0, patches_born = 0, patches_retired = 0, patches_lost = 0;
-  std::size_t patch_vertices_removed = 0;
-  int charts = 0;
-  double utilization = 0;
-  std::size_t chart_texels = 0;
-  double coverage = 0;                    ///< chart texels a patch kept / chart texels
-  std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
-  /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
-  /// the atlas's own build time, on the read-ahead thread (so it overlaps
-  /// the previous frame, except on the first); total: this frame's share of
-  /// the bake's wall time (frames sum to the bake).
-  double seconds_read = 0, seconds_advect = 0, seconds_seed = 0, seconds_atlas = 0, seconds_raster = 0,
-         seconds_write = 0, seconds_total = 0;
-  double peak_rss_mb = 0;
-  std::string velocity_source;
-};
+/// Where BakeOptions says the frames and their velocities come from.
+FrameSource frame_source(const BakeOptions& options);
 
 /// Fills automatic values (radius, resolution) from the first frame and the
 /// exemplar, and checks every option. Throws UsageError / InputError.
@@ -88,17 +71,17 @@ void bake(const BakeOptions& options, const std::function<void(const FrameStats&
 double peak_rss_mb();
 
 /// Makes the C library keep freed large blocks for reuse instead of returning
-/// them to the kernel. A bake allocates the same ~2 GB of frame buffers every
-/// frame at 6144^2 (images, texel maps, EXR conversion buffers); glibc serves
-/// blocks over 32 MiB with fresh mmap pages, which the kernel zeroes on first
-/// touch, page by page, every frame (a fifth of the raster's time). After this
-/// call they come from the heap and are reused. All threads share that one
-/// heap: a thread's own arena grows in 64 MiB pieces and serves anything
-/// larger from mmap whatever the settings, and the texel map (built on the
-/// read-ahead thread) and the EXR half buffers are allocated off the main
-/// thread. Process-wide: call it once
-/// from main(), before any thread starts (the lapflow CLI and the benchmark
-/// do). Peak memory is unchanged; memory freed between frames stays mapped.
+/// them to the kernel. A bake allocates the same large frame buffers every
+/// frame (images, texel maps, EXR conversion buffers); glibc serves large
+/// blocks with fresh mmap pages, which the kernel zeroes on first touch, page
+/// by page, every frame. After this call they come from the heap and are
+/// reused. All threads share that one heap: a thread's own arena serves
+/// anything larger than its heap from mmap whatever the settings, and the
+/// texel map (built on the read-ahead thread) and the EXR half buffers are
+/// allocated off the main thread. Process-wide: call it once from main(),
+/// before any thread starts (the lapflow CLI and the benchmark do). Peak
+/// memory is unchanged; memory freed between frames stays mapped. The cost
+/// it saves is in docs/performance.md.
 void keep_freed_memory_for_reuse();
 
 }  // namespace lapflow

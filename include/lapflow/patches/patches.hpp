@@ -142,14 +142,16 @@ struct AdvectStats {
 /// t + dt) by Heun's RK2 (velocity linear in time in between), sub-stepped,
 /// then projects onto `next`; removes what moved too far, isolated vertices
 /// and patches left with no triangle (order of the others kept). Updates
-/// surface_triangle and the weights. Same result for any thread count.
+/// surface_triangle; the weights are update_weights' job (step 5). Same
+/// result for any thread count.
 AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev, const VelocityField& v_next,
-                           const PatchOptions& patch_options, const AdvectOptions& options,
-                           const WeightOptions& weights, PatchSet& patches);
+                           const PatchOptions& patch_options, const AdvectOptions& options, PatchSet& patches);
 
 /// ALGORITHM.md step 5: Q_T, Q_V, B_V, w_V of one patch against the surface
 /// normals of `surface` (for the fold test).
 void patch_weights(const TriMesh& surface, double radius, const WeightOptions& options, Patch& patch);
+/// Step 5 for every patch (after advection), in parallel.
+void update_weights(const TriMesh& surface, double radius, const WeightOptions& options, PatchSet& patches);
 
 /// Writes all patches as one binary PLY with per-vertex `patch_id`, `u`, `v`,
 /// `w` and per-face `patch_id` (atomically).

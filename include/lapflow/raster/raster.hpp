@@ -1,7 +1,8 @@
 #pragma once
 /// \file raster.hpp Lapped rasterization of the patches into the surface atlas
-/// (ALGORITHM.md steps 7-9): feature-map erosion, hole filling, retirement,
-/// and the atlas images (colour, displacement, AOV) with gutter dilation.
+/// (ALGORITHM.md steps 7-9), one function per step: draw with feature-map
+/// erosion, fill holes, resolve the atlas images (colour, displacement, AOV),
+/// retire, dilate the gutter.
 ///
 /// Design (speed is the point): no per-texel patch search. Every patch
 /// triangle is rasterized in atlas space (its vertices' fluid triangles give
@@ -12,6 +13,7 @@
 /// then samples the exemplar for each texel's winner.
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -118,21 +120,77 @@ using PatchMaker = std::function<std::optional<Patch>(const SurfacePoint& at, ui
 /// surface_triangle is unknown).
 using TriangleLocator = std::function<int(const Vec3& p)>;
 
-/// Steps 7-9 on `mesh` and its atlas. Hole-filling patches come from
-/// `make_patch` (nullptr: no hole filling), one per hole at its centre, in
-/// rounds (docs/raster.md), and are appended to `patches` with ids from
-/// patches.next_id and birth frame `frame`; retired patches are
-/// removed. Patch triangles whose triangle_delta exceeds weights.delta_max are
-/// not drawn (Erosion and Blend modes). Deterministic at any thread count.
-FrameTextures rasterize_atlas(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                              const RasterOptions& options, const WeightOptions& weights, int frame,
-                              const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches);
+namespace detail {
+struct RasterContext;
+}
 
-/// The production entry point: hole-filling patches by create_patch on
-/// `surface` (fluid triangle normal at the texel), vertices located by
-/// closest point.
-FrameTextures rasterize_atlas(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                              const RasterOptions& options, const PatchOptions& patch_options,
-                              const WeightOptions& weights, int frame, PatchSet& patches);
+/// One frame's lapped rasterization in progress (ALGORITHM.md steps 7-9):
+/// for every chart texel, the patch that keeps it, and what the steps have
+/// counted so far. begin_raster() makes it for one mesh and atlas (both must
+/// outlive it); the steps then run in this order: draw_patches, fill_holes,
+/// resolve_texels, retire_patches, dilate_gutter (which spends it). Every
+/// step is deterministic at any thread count.
+struct RasterBuffers {
+  RasterStats stats;                         ///< counts so far (timings are the caller's)
+  /// Chart texels each patch gives the frame, aligned with PatchSet::patches
+  /// (set by resolve_texels, then by retire_patches for the survivors).
+  std::vector<uint64_t> texels_won;
+  std::shared_ptr<detail::RasterContext> context;  ///< per-texel keys and tables (src/raster/internal.hpp)
+};
+
+/// Set-up: the texel index, the per-texel keys (none yet), fluid-triangle
+/// tables and the exemplar's level of detail. `locate` finds the fluid
+/// triangle under a patch vertex whose surface_triangle is unknown (may be
+/// empty).
+RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate = {});
+
+/// Step 7: draws every patch triangle into the atlas (its vertices' fluid
+/// triangles give their atlas positions); the erosion test is the discard
+/// and age the depth: each chart texel keeps the oldest patch that is not
+/// eroded there. Patch triangles with triangle_delta over weights.delta_max
+/// are not drawn (Erosion and Blend modes).
+void draw_patches(RasterBuffers& buffers, const PatchSet& patches);
+
+/// Step 8: new patches from `make_patch` (none when it is empty) at the
+/// centres of the holes, in rounds (docs/raster.md), appended to `patches`
+/// with ids from patches.next_id and birth frame `frame`; each newborn is
+/// drawn into the still-open texels. Texels still open after that take a
+/// neighbour's patch (forced_texels).
+void fill_holes(RasterBuffers& buffers, PatchSet& patches, int frame, const PatchMaker& make_patch);
+
+/// The atlas images: each chart texel's colour, displacement and AOV from
+/// the patch that keeps it, at its (u, v). Counts the texels each patch won.
+FrameTextures resolve_texels(RasterBuffers& buffers, const PatchSet& patches);
+
+/// Step 9: removes the patches that gave the frame no texel (never in
+/// NoErosion mode or with RasterOptions::retire off).
+void retire_patches(RasterBuffers& buffers, PatchSet& patches);
+
+/// Fills the texels outside charts from the nearest chart texel (gutter),
+/// then frees the buffers' per-texel state.
+void dilate_gutter(RasterBuffers& buffers, FrameTextures& textures);
+
+/// Steps 7-9 and the dilation in the bake's order, timed into
+/// FrameTextures::stats: for callers that need no step in between (tests,
+/// the benchmark). Hole-filling patches come from `make_patch` (empty: no
+/// hole filling).
+FrameTextures raster_frame(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const WeightOptions& weights, int frame,
+                           const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches);
+
+/// Hole-filling patches by create_patch on `surface` (the fluid triangle's
+/// normal at the texel). `adjacency` (of surface.mesh()) must outlive it.
+PatchMaker surface_patch_maker(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency,
+                               const PatchOptions& patch_options, const WeightOptions& weights, int frame);
+
+/// The fluid triangle under a patch vertex by closest point within r / 4
+/// (the advection's projection limit): farther, it is not on this surface.
+TriangleLocator surface_triangle_locator(const SurfaceQuery& surface, double radius);
+
+/// raster_frame with hole-filling patches and vertex location on `surface`.
+FrameTextures raster_frame(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const PatchOptions& patch_options,
+                           const WeightOptions& weights, int frame, PatchSet& patches);
 
 }  // namespace lapflow

@@ -1,0 +1,95 @@
+#pragma once
+/// \file frame.hpp One frame of a bake: everything known about it (mesh,
+/// surface queries, velocity, atlas, raster buffers, textures, statistics),
+/// and load_frame(), the one way every command reads a frame and its
+/// velocity. The patches are not part of it: they carry over from frame to
+/// frame (PatchSet).
+#include <cstddef>
+#include <memory>
+#include <string>
+
+#include "lapflow/atlas/atlas.hpp"
+#include "lapflow/raster/raster.hpp"
+#include "lapflow/surface/mesh.hpp"
+#include "lapflow/surface/surface_query.hpp"
+#include "lapflow/surface/velocity.hpp"
+
+namespace lapflow {
+
+/// Where frames come from and how their velocity is read: the rules `lapflow
+/// bake`, `lapflow patches`, `lapflow eval` and the benchmark share.
+struct FrameSource {
+  std::string mesh_pattern;          ///< per-frame PLY/OBJ pattern (io/mesh_io.hpp's FramePattern)
+  std::string velocity_vdb_pattern;  ///< per-frame OpenVDB files; per-vertex velocities when empty
+  std::string velocity_grid;         ///< grid name; tries vel, v, velocity when empty
+  double min_speed = 0;              ///< m/s: slower velocities count as zero
+  bool allow_zero_velocity = false;  ///< a mesh without velocity is still (else an InputError)
+  /// Per-vertex velocities are sampled once per frame on voxels of
+  /// `velocity_voxel` mean edge lengths within `velocity_band` voxels of the
+  /// surface, then read trilinearly (band 0 = an exact closest-point query
+  /// for every sample).
+  int velocity_band = 6;
+  double velocity_voxel = 2.0;
+};
+
+/// Statistics of one baked frame (one line of NAME.stats.jsonl).
+struct FrameStats {
+  int frame = 0;
+  std::size_t triangles = 0, vertices = 0;
+  std::size_t patches_alive = 0, patches_born = 0, patches_retired = 0, patches_lost = 0;
+  std::size_t patch_vertices_removed = 0;
+  int charts = 0;
+  double utilization = 0;
+  std::size_t chart_texels = 0;
+  double coverage = 0;                    ///< chart texels a patch kept / chart texels
+  std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
+  /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
+  /// the atlas's own build time, on the read-ahead thread (so it overlaps
+  /// the previous frame, except on the first); raster: draw, holes, resolve,
+  /// retire and dilate together (each also on its own); total: this frame's
+  /// share of the bake's wall time (frames sum to the bake).
+  double seconds_read = 0, seconds_advect = 0, seconds_weights = 0, seconds_seed = 0, seconds_atlas = 0,
+         seconds_raster = 0, seconds_write = 0, seconds_total = 0;
+  double seconds_draw = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0, seconds_dilate = 0;
+  double peak_rss_mb = 0;
+  std::string velocity_source;
+};
+
+/// A frame's input as read from disk: the mesh and, with a VDB pattern, the
+/// velocity grid. Checks the velocity rules of FrameSource (a missing
+/// velocity is an InputError naming the file unless allowed).
+struct FrameInput {
+  int number = 0;
+  std::string path;                     ///< the mesh file
+  TriMesh mesh;                         ///< with per-vertex velocities when the file has them
+  std::unique_ptr<VelocityGrid> grid;   ///< set with FrameSource::velocity_vdb_pattern
+};
+FrameInput read_frame_input(const FrameSource& source, int frame);
+
+/// Everything about one frame. Members refer to each other (the surface
+/// query to the mesh, the velocity to both), so a Frame stays where it was
+/// made: load_frame() hands it out behind a pointer.
+struct Frame {
+  Frame() = default;
+  Frame(const Frame&) = delete;
+  Frame& operator=(const Frame&) = delete;
+
+  int number = 0;
+  std::string path;                     ///< the mesh file
+  TriMesh mesh;
+  std::unique_ptr<SurfaceQuery> surface;          ///< closest points on `mesh`
+  std::unique_ptr<VelocityGrid> velocity_grid;    ///< with a VDB pattern
+  VelocityField velocity;                         ///< after FrameSource's rules (band, min-speed)
+  std::string velocity_source;                    ///< "vertex", "vdb:NAME", "zero", ...
+  SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas)
+  RasterBuffers raster;                           ///< steps 7-9 in progress
+  FrameTextures textures;                         ///< the atlas images once resolved
+  FrameStats stats;
+};
+
+/// Reads frame `frame`: its mesh, the closest-point structure and the
+/// velocity field under `source`'s rules. The atlas and the rest are the
+/// stages' to fill. Throws InputError naming the file and frame.
+std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame);
+
+}  // namespace lapflow

@@ -1,0 +1,61 @@
+// Reading a frame and its velocity, the same way for every command.
+#include "lapflow/bake/frame.hpp"
+
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/mesh_io.hpp"
+
+namespace lapflow {
+
+FrameInput read_frame_input(const FrameSource& source, int frame) {
+  FrameInput in;
+  in.number = frame;
+  in.path = FramePattern(source.mesh_pattern).path(frame);
+  try {
+    in.mesh = read_mesh(in.path);
+  } catch (const InputError& e) {
+    throw e.with_frame(frame);
+  }
+  if (!source.velocity_vdb_pattern.empty()) {
+    const std::string vdb = FramePattern(source.velocity_vdb_pattern).path(frame);
+    try {
+      in.grid = std::make_unique<VelocityGrid>(vdb, source.velocity_grid);
+    } catch (const InputError& e) {
+      throw e.with_frame(frame);
+    }
+  } else if (!in.mesh.has_velocities() && !in.mesh.empty() && !source.allow_zero_velocity) {
+    throw InputError(in.path,
+                     "no per-vertex velocity (vx vy vz) and no --velocity-vdb; pass --allow-zero-velocity to bake a "
+                     "still texture",
+                     frame);
+  }
+  return in;
+}
+
+std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame) {
+  FrameInput in = read_frame_input(source, frame);
+  auto f = std::make_unique<Frame>();
+  f->number = frame;
+  f->path = std::move(in.path);
+  f->mesh = std::move(in.mesh);
+  f->surface = std::make_unique<SurfaceQuery>(f->mesh);
+  f->velocity_grid = std::move(in.grid);
+  if (f->velocity_grid) {
+    f->velocity = grid_velocity_field(*f->velocity_grid);
+    f->velocity_source = "vdb:" + f->velocity_grid->grid_name();
+  } else if (f->mesh.has_velocities()) {
+    f->velocity = vertex_velocity_field(*f->surface);
+    f->velocity_source = "vertex";
+    if (source.velocity_band > 0) {
+      f->velocity = banded_velocity_field(std::move(f->velocity), f->mesh,
+                                          source.velocity_voxel * mean_edge_length(f->mesh), source.velocity_band);
+      f->velocity_source = "vertex (band of " + std::to_string(source.velocity_band) + " voxels)";
+    }
+  } else {
+    f->velocity = [](const Vec3&) { return Vec3{}; };
+    f->velocity_source = "zero";
+  }
+  if (source.min_speed > 0) f->velocity = with_min_speed(std::move(f->velocity), source.min_speed);
+  return f;
+}
+
+}  // namespace lapflow

@@ -1,0 +1,131 @@
+#include "bake/writer.hpp"
+
+#include <exception>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/core/stopwatch.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/uv_mesh.hpp"
+
+namespace lapflow::detail {
+namespace fs = std::filesystem;
+namespace {
+
+nlohmann::json stats_json(const FrameStats& s) {
+  return {{"frame", s.frame},
+          {"triangles", s.triangles},
+          {"vertices", s.vertices},
+          {"velocity", s.velocity_source},
+          {"patches", {{"alive", s.patches_alive}, {"born", s.patches_born}, {"retired", s.patches_retired},
+                       {"lost", s.patches_lost}}},
+          {"patch_vertices_removed", s.patch_vertices_removed},
+          {"charts", s.charts},
+          {"utilization", s.utilization},
+          {"chart_texels", s.chart_texels},
+          {"coverage", s.coverage},
+          {"forced_texels", s.forced_texels},
+          {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"weights", s.seconds_weights},
+                       {"seed", s.seconds_seed}, {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster},
+                       {"draw", s.seconds_draw}, {"holes", s.seconds_holes}, {"resolve", s.seconds_resolve},
+                       {"retire", s.seconds_retire}, {"dilate", s.seconds_dilate}, {"write", s.seconds_write},
+                       {"total", s.seconds_total}}},
+          {"peak_rss_mb", s.peak_rss_mb}};
+}
+
+}  // namespace
+
+/// Everything one frame's files are made of, owned by the writer.
+struct FrameWriter::Job {
+  int frame = 0;
+  FrameTextures textures;
+  SurfaceAtlas atlas;
+  std::shared_ptr<const Frame> surface;  ///< for the mesh
+  PatchSet patches;                      ///< a copy, with dump_patches only
+};
+
+FrameWriter::FrameWriter(const BakeOptions& options, const BakeManifest& names,
+                         std::function<void(const FrameStats&)> on_frame)
+    : options_(options),
+      names_(names),
+      on_frame_(std::move(on_frame)),
+      stats_path_((fs::path(options.out_dir) / (options.name + ".stats.jsonl")).string()) {}
+
+double FrameWriter::write_files(const Job& w) const {
+  Stopwatch clock;
+  const BakeOptions& o = options_;
+  const int f = w.frame;
+  const std::string color = names_.frame_file("color", f), disp = names_.frame_file("disp", f);
+  std::vector<std::function<void()>> jobs;
+  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
+  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
+  if (o.aov)
+    jobs.push_back([&] {
+      // Data: float, and never lossy.
+      const ExrCompression lossless =
+          o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
+      write_exr(names_.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
+                {ExrPixelType::Float, lossless});
+    });
+  jobs.push_back([&] {
+    UvMeshMaterial material;
+    material.name = o.name;
+    material.color_texture = fs::path(color).filename().string();
+    material.displacement_texture = fs::path(disp).filename().string();
+    write_uv_mesh_obj(names_.frame_file("obj", f), w.surface->mesh, w.atlas, material);
+  });
+  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names_.frame_file("patches", f), w.patches); });
+  if (o.background_write) {
+    // One after the other on this thread (OpenEXR compresses on its own
+    // pool): the writer must not take the TBB workers the next frame needs.
+    for (const auto& job : jobs) job();
+    return clock.lap();
+  }
+  // Nothing else runs: the files are written concurrently (OIIO converts
+  // each image on one thread). Each job keeps its own error; the first in
+  // job order is rethrown.
+  std::vector<std::exception_ptr> errors(jobs.size());
+  parallel_for(jobs.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      try {
+        jobs[i]();
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    }
+  }, 1);
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  return clock.lap();
+}
+
+void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds) {
+  auto job = std::make_shared<Job>();
+  job->frame = frame->number;
+  job->textures = std::move(frame->textures);
+  job->atlas = std::move(frame->atlas);
+  job->surface = frame;
+  if (options_.dump_patches) job->patches = patches;
+  finish();  // at most one frame in flight: bounds memory to two frames of images
+  pending_stats_ = frame->stats;
+  pending_compute_seconds_ = compute_seconds;
+  pending_ = std::async(std::launch::async, [this, job] { return write_files(*job); });
+  if (!options_.background_write) finish();
+}
+
+void FrameWriter::finish() {
+  if (!pending_.valid()) return;
+  Stopwatch wait;
+  pending_stats_.seconds_write = pending_.get();  // rethrows a write error
+  // Wall time the frame cost the bake: its computation plus the wait for
+  // its files beyond the next frame's computation (frames sum to the bake).
+  pending_stats_.seconds_total = pending_compute_seconds_ + wait.lap();
+  pending_stats_.peak_rss_mb = peak_rss_mb();
+  stats_text_ += stats_json(pending_stats_).dump() + "\n";
+  write_text_atomically(stats_path_, stats_text_);
+  if (on_frame_) on_frame_(pending_stats_);
+}
+
+}  // namespace lapflow::detail

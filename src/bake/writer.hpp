@@ -1,0 +1,40 @@
+#pragma once
+// Writing a baked frame (ALGORITHM.md step 10): its atlas images, UV mesh,
+// optional AOV and patch dump, each atomically, and its line of
+// NAME.stats.jsonl once all of them are on disk.
+#include <functional>
+#include <future>
+#include <memory>
+#include <string>
+
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/manifest.hpp"
+
+namespace lapflow::detail {
+
+class FrameWriter {
+ public:
+  FrameWriter(const BakeOptions& options, const BakeManifest& names, std::function<void(const FrameStats&)> on_frame);
+  /// Takes the frame's textures and atlas (moved out of `frame`; the mesh is
+  /// shared) and writes its files. `compute_seconds` is the wall time the
+  /// frame took before writing. With BakeOptions::background_write the files
+  /// are written while the caller goes on (at most one frame in flight);
+  /// otherwise they are on disk when this returns.
+  void write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds);
+  /// Waits for the frame in flight, if any; rethrows its write error.
+  void finish();
+
+ private:
+  struct Job;
+  double write_files(const Job& job) const;
+
+  const BakeOptions& options_;
+  const BakeManifest& names_;
+  std::function<void(const FrameStats&)> on_frame_;
+  std::string stats_path_, stats_text_;
+  std::future<double> pending_;
+  FrameStats pending_stats_;
+  double pending_compute_seconds_ = 0;
+};
+
+}  // namespace lapflow::detail
