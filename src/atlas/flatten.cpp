@@ -1,16 +1,15 @@
-// LSCM of every atlas chart (Lévy et al. 2002) with Eigen: two pinned
-// vertices, the normal equations assembled from per-triangle 6x6 blocks and
-// solved with a sparse LDLT. Charts that flip a triangle or stretch too much
-// are split and redone, never dropped.
+// LSCM of every atlas chart (Levy et al. 2002) with the shared solver of
+// surface/lscm.hpp: two pinned vertices at the ends of the chart's longest
+// side. Charts that flip a triangle or stretch too much are split and redone,
+// never dropped.
 #include <Eigen/Eigenvalues>
-#include <Eigen/Sparse>
-#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
 
 #include "atlas/internal.hpp"
 #include "lapflow/core/parallel.hpp"
+#include "surface/lscm.hpp"
 
 namespace lapflow::atlas_detail {
 namespace {
@@ -49,61 +48,24 @@ bool flatten_one(const TriMesh& mesh, const TriangleInfo& info, const std::vecto
       if (mesh.positions[verts[i]][axis] > mesh.positions[verts[pb]][axis]) pb = i;
     }
     if (pa == pb) return true;  // cannot happen with a proper triangle; keep the point
-    uv[pa] = {0, 0};
-    uv[pb] = {norm(mesh.positions[verts[pb]] - mesh.positions[verts[pa]]), 0};
-    std::vector<int> var(nv);
-    {
-      int next = 0;
-      for (int i = 0; i < nv; ++i) var[i] = (i == pa || i == pb) ? -1 : 2 * next++;
-    }
-    const int n = 2 * (nv - 2);
-    std::vector<Eigen::Triplet<double>> trip;
-    trip.reserve(tris.size() * 21);
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
-    for (int32_t t : tris) {
-      if (info.degenerate[t]) continue;
-      const Tri& f = mesh.triangles[t];
-      const Vec3 p0 = mesh.positions[f[0]], p1 = mesh.positions[f[1]], p2 = mesh.positions[f[2]];
-      const Vec3 ex = normalized(p1 - p0);
-      const Vec3 ey = cross(info.normal[t], ex);
-      const Vec2 q[3] = {{0, 0}, {norm(p1 - p0), 0}, {dot(p2 - p0, ex), dot(p2 - p0, ey)}};
-      const double area = 0.5 * cross(q[1] - q[0], q[2] - q[0]);
-      if (!(area > 0)) continue;
-      const double k = 1.0 / (2.0 * std::sqrt(area));
-      // Cauchy-Riemann residual rot90(grad u) - grad v, weighted by sqrt(area):
-      // row x: sum -e.x u + e.y v; row y: sum -e.y u - e.x v, e = edge opposite.
-      double cx[6], cy[6];
-      int col[6], li[3];
-      for (int j = 0; j < 3; ++j) {
-        const Vec2 e = q[(j + 2) % 3] - q[(j + 1) % 3];
-        cx[2 * j] = -e.x * k, cx[2 * j + 1] = e.y * k;
-        cy[2 * j] = -e.y * k, cy[2 * j + 1] = -e.x * k;
-        li[j] = local(f[j]);
-        col[2 * j] = var[li[j]] < 0 ? -1 : var[li[j]];
-        col[2 * j + 1] = var[li[j]] < 0 ? -1 : var[li[j]] + 1;
+    // The chart on its own: its vertices renumbered, its proper triangles
+    // (degenerate ones ask nothing of the map).
+    std::vector<Vec3> positions(nv);
+    for (int i = 0; i < nv; ++i) positions[i] = mesh.positions[verts[i]];
+    std::vector<Tri> local_tris;
+    local_tris.reserve(tris.size());
+    for (int32_t t : tris)
+      if (!info.degenerate[t]) {
+        const Tri& f = mesh.triangles[t];
+        local_tris.push_back({local(f[0]), local(f[1]), local(f[2])});
       }
-      double known_x = 0, known_y = 0;
-      for (int j = 0; j < 3; ++j)
-        if (var[li[j]] < 0) {
-          known_x += cx[2 * j] * uv[li[j]].x + cx[2 * j + 1] * uv[li[j]].y;
-          known_y += cy[2 * j] * uv[li[j]].x + cy[2 * j + 1] * uv[li[j]].y;
-        }
-      for (int a = 0; a < 6; ++a) {
-        if (col[a] < 0) continue;
-        rhs[col[a]] -= cx[a] * known_x + cy[a] * known_y;
-        for (int b = 0; b < 6; ++b)
-          if (col[b] >= 0 && col[b] <= col[a]) trip.emplace_back(col[a], col[b], cx[a] * cx[b] + cy[a] * cy[b]);
-      }
-    }
-    if (n > 0) {
-      Eigen::SparseMatrix<double> m(n, n);
-      m.setFromTriplets(trip.begin(), trip.end());
-      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> solver(m);
-      if (solver.info() != Eigen::Success && !force) return false;
-      const Eigen::VectorXd x = solver.solve(rhs);
-      if ((solver.info() != Eigen::Success || !x.allFinite()) && !force) return false;
-      for (int i = 0; i < nv; ++i)
-        if (var[i] >= 0 && std::isfinite(x[var[i]]) && std::isfinite(x[var[i] + 1])) uv[i] = {x[var[i]], x[var[i] + 1]};
+    const Vec2 uv_a{0, 0}, uv_b{norm(positions[pb] - positions[pa]), 0};
+    if (!detail::lscm_flatten(positions, local_tris, uv, pa, pb, uv_a, uv_b)) {
+      if (!force) return false;
+      // Singular: only the pins have a place; the checks below see the
+      // collapsed triangles.
+      uv.assign(nv, Vec2{});
+      uv[pa] = uv_a, uv[pb] = uv_b;
     }
   }
 

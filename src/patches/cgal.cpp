@@ -1,5 +1,5 @@
 // CGAL adapters for patches: isotropic remeshing of a new patch, and CGAL's
-// LSCM (kept as the reference the Eigen solver in flatten_patch.cpp is tested
+// LSCM (kept as the reference lscm_flatten in surface/lscm.cpp is tested
 // against). The only translation unit of the patch stages that sees CGAL.
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/remesh.h>

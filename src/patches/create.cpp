@@ -264,7 +264,8 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
     std::vector<int32_t> cut_triangles;
     const PatchMesh wide = cut_patch(fluid, adjacency, seed, at.position, n_p, r + edge, &cut_triangles);
     trace.lattice = detail::lattice_resample(surface, wide, cut_triangles, at.position, n_p, r, edge, mesh, under);
-    if (trace.lattice == detail::LatticeResult::Resampled && detail::lscm_flatten(mesh, uv)) {
+    if (trace.lattice == detail::LatticeResult::Resampled &&
+        detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) {
       flat = true;
       trace.path = PatchPath::Lattice;
     }
@@ -285,7 +286,7 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
     if (remeshed_ok) {
       trim_to_ball(remeshed, at.position, r);
       snap(remeshed);
-      if (detail::lscm_flatten(remeshed, uv)) {
+      if (detail::lscm_flatten(remeshed.positions, remeshed.triangles, uv)) {
         mesh = std::move(remeshed);
         flat = true;
         trace.path = PatchPath::Remeshed;
@@ -295,7 +296,7 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
   if (!flat) {
     trace.path = PatchPath::Cut;
     snap(mesh);
-    if (!detail::lscm_flatten(mesh, uv)) return std::nullopt;
+    if (!detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) return std::nullopt;
   }
 
   // p's uv: barycentric in the patch triangle closest to p.

@@ -5,40 +5,20 @@
 
 #include "lapflow/patches/patches.hpp"
 #include "lapflow/core/vec.hpp"
+#include "surface/lscm.hpp"
 
 namespace lapflow::detail {
 
-/// A small open triangle mesh in plain arrays (a patch before it gets uv).
+/// A small open triangle mesh in plain arrays (a patch before it gets uv;
+/// lscm_flatten(m.positions, m.triangles, uv) flattens it).
 struct PatchMesh {
   std::vector<Vec3> positions;
   std::vector<Tri> triangles;
 };
 
-/// Least-squares conformal map (Levy et al. 2002) solved directly (exact
-/// minimum degree ordering, sparse L D L^H; beyond 1536 unknowns the Eigen
-/// solver of lscm_flatten_reference): `uv` gets one coordinate per vertex;
-/// vertices `pin_a` and `pin_b` are pinned at
-/// `uv_a` and `uv_b` (pins < 0: two far-apart border vertices chosen here, at
-/// (0,0) and (their 3D distance, 0)). The energy is that of holomorphic maps,
-/// so triangles counter-clockwise in 3D stay counter-clockwise in uv (up to
-/// the rare flip LSCM allows). Returns false when the system is singular (no uv written). The mesh
-/// must be edge-connected.
-bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
-                  Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
-
-/// The previous solver (triplets, Eigen SimplicialLDLT with AMD ordering): the
-/// reference the tests compare lscm_flatten against, and lscm_flatten's path
-/// for systems too large for its bit-matrix ordering. Same contract.
-bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a = -1, int pin_b = -1,
-                            Vec2 uv_a = {0, 0}, Vec2 uv_b = {1, 0});
-
-/// The conformal energy LSCM minimizes (sum over triangles of area times the
-/// squared Cauchy-Riemann residual), in uv units squared.
-double lscm_energy(const PatchMesh& mesh, const std::vector<Vec2>& uv);
-
 /// The same map computed by CGAL's LSCM_parameterizer_3 with
 /// Two_vertices_parameterizer_3(pin_a, pin_b), which places the pins at (0,0.5)
-/// and (1,0.5). For tests that the Eigen solver agrees with CGAL.
+/// and (1,0.5). For tests that lscm_flatten agrees with CGAL.
 bool cgal_lscm_flatten(const PatchMesh& mesh, int pin_a, int pin_b, std::vector<Vec2>& uv);
 
 /// CGAL isotropic remeshing with target edge length `target_edge` (metres);

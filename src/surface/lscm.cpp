@@ -1,29 +1,36 @@
 // Least-squares conformal maps (Levy, Petitjean, Ray, Maillot 2002) solved
-// directly. CGAL's LSCM_parameterizer_3 gives the same map (a test checks it)
-// but spends most of its time in set-up and its own CG solver; a sparse
-// Cholesky on the (complex, Hermitian) normal equations is several times
-// faster on the 100-1000 triangle patches lapflow creates by the thousand.
-// Eigen's SimplicialLDLT (lscm_flatten_reference) spent most of its time on
-// such small systems in AMD's bookkeeping, triplet sorting and symbolic
-// analysis; lscm_flatten builds the matrix on the vertex adjacency, orders it
-// by exact minimum degree on a bit matrix (which also yields the factor's
-// pattern) and factors it with a short up-looking LDL^H: 0.086 against
-// 0.233 ms (thread CPU) on seeded patches of ~230 vertices, same map to
-// rounding.
+// directly: the one LSCM of lapflow, flattening both patches and atlas charts.
+// CGAL's LSCM_parameterizer_3 gives the same map (a test checks it) but spends
+// most of its time in set-up and its own CG solver; a sparse Cholesky on the
+// (complex, Hermitian) normal equations is several times faster on the
+// 100-1000 triangle patches lapflow creates by the thousand. Eigen's
+// SimplicialLDLT (lscm_flatten_reference) spent most of its time on such small
+// systems in AMD's bookkeeping, triplet sorting and symbolic analysis;
+// lscm_flatten builds the matrix on the vertex adjacency, orders it by exact
+// minimum degree on a bit matrix (which also yields the factor's pattern) and
+// factors it with a short up-looking LDL^H. Same map to rounding; timings in
+// docs/patches.md and docs/performance.md.
 #include <Eigen/Sparse>
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <complex>
+#include <span>
 
-#include "patches/internal.hpp"
+#include "surface/lscm.hpp"
 
 namespace lapflow::detail {
 namespace {
 
+// The arrays a caller hands over, viewed as one mesh.
+struct Mesh {
+  std::span<const Vec3> positions;
+  std::span<const Tri> triangles;
+};
+
 // Border vertices (on an edge used by one triangle), in vertex order.
-std::vector<int> border_vertices(const PatchMesh& m) {
+std::vector<int> border_vertices(const Mesh& m) {
   std::vector<std::pair<uint64_t, int>> edges;
   edges.reserve(m.triangles.size() * 3);
   for (const Tri& t : m.triangles)
@@ -60,7 +67,7 @@ struct VertexAdjacency {
   std::vector<uint8_t> on_border, used;
 };
 
-VertexAdjacency vertex_adjacency(const PatchMesh& m) {
+VertexAdjacency vertex_adjacency(const Mesh& m) {
   const int nv = int(m.positions.size()), nt = int(m.triangles.size());
   VertexAdjacency a;
   a.on_border.assign(nv, 0);
@@ -124,10 +131,9 @@ VertexAdjacency vertex_adjacency(const PatchMesh& m) {
   return a;
 }
 
-// Beyond this many unknowns the bit-matrix ordering below grows as n^2;
-// larger systems go to the Eigen solver (AMD ordering). On curved grids this
-// solver takes 0.37 ms against Eigen's 0.51 at 529 vertices, 1.0 against 1.2
-// at 1024, and the same 2.8 ms at 2025.
+// Beyond this many unknowns the bit-matrix ordering below grows as n^2 and
+// Eigen's AMD ordering catches up (docs/performance.md): larger systems go to
+// the Eigen solver.
 constexpr int kMaxMinimumDegreeSize = 1536;
 
 // Counting set bits is the inner loop of the ordering below; std::popcount
@@ -342,7 +348,7 @@ class HermitianLdlt {
   std::vector<double> lx_, d_;
 };
 
-int farthest_from(const PatchMesh& m, const std::vector<int>& candidates, const Vec3& p) {
+int farthest_from(const Mesh& m, const std::vector<int>& candidates, const Vec3& p) {
   int best = candidates.front();
   double best_d = -1;
   for (int v : candidates) {
@@ -357,7 +363,7 @@ int farthest_from(const PatchMesh& m, const std::vector<int>& candidates, const 
 // LSCM path uses this one computation: on a triangle whose area is rounding
 // noise, q[2].y = dot(e2, Y) is not d / l1, and the map depends on which one
 // is used.
-bool local_frame(const PatchMesh& mesh, const Tri& t, Vec2 q[3], double& d) {
+bool local_frame(const Mesh& mesh, const Tri& t, Vec2 q[3], double& d) {
   const Vec3 e1 = mesh.positions[t[1]] - mesh.positions[t[0]], e2 = mesh.positions[t[2]] - mesh.positions[t[0]];
   const Vec3 n = cross(e1, e2);
   d = norm(n);
@@ -372,7 +378,9 @@ bool local_frame(const PatchMesh& mesh, const Tri& t, Vec2 q[3], double& d) {
 
 }  // namespace
 
-bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int pin_b, Vec2 uv_a, Vec2 uv_b) {
+bool lscm_flatten(std::span<const Vec3> positions, std::span<const Tri> triangles, std::vector<Vec2>& uv, int pin_a,
+                  int pin_b, Vec2 uv_a, Vec2 uv_b) {
+  const Mesh mesh{positions, triangles};
   const int nv = int(mesh.positions.size());
   if (nv < 3 || mesh.triangles.empty()) return false;
   const VertexAdjacency adj = vertex_adjacency(mesh);
@@ -396,7 +404,7 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
   int nf = 0;
   for (int v = 0; v < nv; ++v)
     if (v != pin_a && v != pin_b) index[v] = nf++;
-  if (nf > kMaxMinimumDegreeSize) return lscm_flatten_reference(mesh, uv, pin_a, pin_b, uv_a, uv_b);
+  if (nf > kMaxMinimumDegreeSize) return lscm_flatten_reference(positions, triangles, uv, pin_a, pin_b, uv_a, uv_b);
 
   // Complex form (Levy et al. 2002, section 3.3), as in lscm_flatten_reference:
   // M z = b with M = C^H C Hermitian, one unknown per free vertex. M(v, u) is
@@ -472,7 +480,9 @@ bool lscm_flatten(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int p
   return true;
 }
 
-bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pin_a, int pin_b, Vec2 uv_a, Vec2 uv_b) {
+bool lscm_flatten_reference(std::span<const Vec3> positions, std::span<const Tri> triangles, std::vector<Vec2>& uv,
+                            int pin_a, int pin_b, Vec2 uv_a, Vec2 uv_b) {
+  const Mesh mesh{positions, triangles};
   const int nv = int(mesh.positions.size());
   if (nv < 3 || mesh.triangles.empty()) return false;
   if (pin_a < 0 || pin_b < 0 || pin_a == pin_b) {
@@ -554,7 +564,8 @@ bool lscm_flatten_reference(const PatchMesh& mesh, std::vector<Vec2>& uv, int pi
   return true;
 }
 
-double lscm_energy(const PatchMesh& mesh, const std::vector<Vec2>& uv) {
+double lscm_energy(std::span<const Vec3> positions, std::span<const Tri> triangles, const std::vector<Vec2>& uv) {
+  const Mesh mesh{positions, triangles};
   double energy = 0;
   for (const Tri& t : mesh.triangles) {
     Vec2 q[3];
