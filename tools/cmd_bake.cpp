@@ -163,6 +163,12 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_option("--epsilon", o.raster.epsilon, "Erosion offset epsilon of the paper")
       ->capture_default_str()
       ->group("Erosion");
+  cmd.add_option("--small-hole", o.raster.small_hole,
+                 "Holes no wider than this times the radius are closed by the patches around them instead of a "
+                 "new patch (0 = a new patch for every hole)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0))
+      ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "
                  "ghosts) or advect (no erosion, no retirement: a purely advected texture that stretches)")

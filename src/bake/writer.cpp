@@ -27,6 +27,7 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"chart_texels", s.chart_texels},
           {"coverage", s.coverage},
           {"forced_texels", s.forced_texels},
+          {"closed_texels", s.closed_texels},
           {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"weights", s.seconds_weights},
                        {"seed", s.seconds_seed}, {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster},
                        {"draw", s.seconds_draw}, {"holes", s.seconds_holes}, {"resolve", s.seconds_resolve},

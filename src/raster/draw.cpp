@@ -604,6 +604,7 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const
     }
   }
   st.texel_world_size = asum > 0 ? wsum / asum : 0;
+  ctx.texel_world_size = st.texel_world_size;
   const Image& base = exemplar.mips.levels[0];
   const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
   st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;

@@ -10,6 +10,8 @@
 // texels (their keys are larger than every older patch's, so they never take
 // a texel an older patch keeps). Repeat until no hole is left.
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 #include <unordered_map>
 #include <unordered_set>
@@ -76,13 +78,72 @@ std::vector<uint32_t> uncovered_texels(const RasterContext& ctx, Also&& also) {
   return out;
 }
 
+// How many texel layers hole `id` (its texels `members`, labelled `id`) has
+// inside its rim: 1 for texels next to a covered texel of their chart, 2 for
+// their other neighbours, ... Counts no further than `limit` (returns
+// limit + 1 for a deeper hole). `depth` is scratch, one entry per chart
+// texel, -1 where unused; it is left that way.
+int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, const std::vector<int32_t>& label,
+               int32_t id, std::vector<int32_t>& depth, int limit) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  if (depth.size() != tm.size()) depth.assign(tm.size(), -1);
+  auto for_neighbours = [&](uint32_t i, auto&& visit) {
+    const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = x + dx, yy = y + dy;
+        if ((dx || dy) && xx >= 0 && yy >= 0 && xx < N && yy < N) {
+          const int32_t n = ctx.index[std::size_t(yy) * N + xx];
+          if (n >= 0) visit(uint32_t(n));
+        }
+      }
+  };
+  std::vector<uint32_t> layer, next;
+  for (uint32_t i : members) {
+    bool rim = false;
+    for_neighbours(i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
+    if (rim) {
+      depth[i] = 1;
+      layer.push_back(i);
+    }
+  }
+  int d = 1;
+  std::size_t reached = layer.size();
+  while (!layer.empty() && d <= limit && reached < members.size()) {
+    next.clear();
+    for (uint32_t i : layer)
+      for_neighbours(i, [&](uint32_t n) {
+        if (label[n] != id || depth[n] >= 0) return;
+        depth[n] = d + 1;
+        next.push_back(n);
+      });
+    reached += next.size();
+    layer.swap(next);
+    ++d;
+  }
+  for (uint32_t i : members) depth[i] = -1;
+  return reached == members.size() ? d : limit + 1;
+}
+
 }  // namespace
 
 std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
-                                std::size_t max_patches) {
+                                std::size_t max_patches, std::size_t& closed) {
   const TexelMap& tm = ctx.atlas.texels;
   const int N = ctx.N;
   std::size_t born = 0;
+  closed = 0;
+  // Texel layers a hole may have inside its rim and still be closed by its
+  // neighbours: its half-width in texels.
+  const int max_closed_depth = ctx.texel_world_size > 0
+                                   ? int(std::floor(0.5 * ctx.options.small_hole * ctx.radius / ctx.texel_world_size))
+                                   : 0;
+  std::vector<uint32_t> chart_texels(std::size_t(std::max(ctx.atlas.chart_count, 0)), 0);
+  if (max_closed_depth > 0)
+    for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
+  std::vector<uint8_t> closed_texel(max_closed_depth > 0 ? tm.size() : 0, 0);
+  std::vector<int32_t> depth;  // per chart texel: layer inside its hole (hole_depth's scratch)
   // A fluid triangle where a seed failed (no patch, or a newborn that does
   // not keep its own centre) is not seeded again: its texels go to
   // propagate_keys.
@@ -91,7 +152,9 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   std::vector<uint32_t> open, queue;
   const double spacing = 2 * ctx.radius;
   for (int round = 0; born < max_patches; ++round) {
-    open = uncovered_texels(ctx, [&](std::size_t i) { return failed.empty() || !failed.count(tm.triangle[i]); });
+    open = uncovered_texels(ctx, [&](std::size_t i) {
+      return (closed_texel.empty() || !closed_texel[i]) && (failed.empty() || !failed.count(tm.triangle[i]));
+    });
     if (open.empty()) break;
     if (label.empty()) {
       label.resize(tm.size());
@@ -128,6 +191,19 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
           }
       }
       ++holes;
+      // A hole no wider than RasterOptions::small_hole x r is closed by the
+      // patches around it (propagate_keys) instead of a new patch:
+      // re-meshing alone opens holes of a texel or two at the patches' eroded
+      // edges every frame, and slivers along a slowly spreading rim, and a
+      // full patch born for each would churn the texture and grow the
+      // population without bound. A hole that is its whole chart has no
+      // neighbour to close it and always gets a patch.
+      if (max_closed_depth > 0 && members.size() < chart_texels[chart] &&
+          hole_depth(ctx, members, label, holes - 1, depth, max_closed_depth) <= max_closed_depth) {
+        for (uint32_t i : members) closed_texel[i] = 1;
+        closed += members.size();
+        continue;
+      }
       // The member nearest the centroid (ties: lowest texel index), then, for
       // holes wider than one patch, members in texel order 2r apart.
       std::sort(members.begin(), members.end());
@@ -294,8 +370,9 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   const RasterOptions& options = ctx.options;
   const bool blend = options.mode == RasterMode::Blend;
   if (blend) blend_mark_coverage(ctx);
+  std::size_t closed = 0;
   if (options.fill_holes && make_patch)
-    st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches);
+    st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {
     // The AOV winners (largest weight, ties to the oldest): a second raster
     // pass now that every texel's maximum is known.
@@ -312,7 +389,11 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   // the nearest patch triangle in 3D. Counted in forced_texels. Without hole
   // filling the holes are left visible (alpha 0).
   if (options.fill_holes) {
-    st.forced_texels += propagate_keys(ctx);
+    // The small holes left to their neighbours are closed here too; what
+    // else propagate_keys fills is forced.
+    const std::size_t propagated = propagate_keys(ctx);
+    st.closed_texels += std::min(closed, propagated);
+    st.forced_texels += propagated - std::min(closed, propagated);
     st.forced_texels += cover_from_nearest_patch(ctx, patches);
   }
 }

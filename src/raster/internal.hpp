@@ -61,6 +61,7 @@ struct RasterContext {
   TriangleLocator locate_fn;                ///< owned copy of the caller's locator (may be empty)
   const TriangleLocator* locate = nullptr;  ///< &locate_fn when it is set
   double radius = 0.1;  ///< r (metres)
+  double texel_world_size = 0;  ///< metres per atlas texel (RasterStats::texel_world_size)
   int N = 0;
   /// Texel-map index of every atlas pixel y * N + x, -1 outside charts.
   std::vector<int32_t> index;
@@ -116,8 +117,11 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texe
 /// Step 8: new patches at the centres of the holes (open chart texels,
 /// 8-connected within a chart), in rounds of seeds 2r apart created in
 /// parallel, each drawn into the still-open texels. Returns patches born.
+/// Holes no wider than RasterOptions::small_hole x r (and not a whole chart)
+/// get no patch: they are left open for propagate_keys, and `closed` counts
+/// their texels.
 std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
-                                std::size_t max_patches);
+                                std::size_t max_patches, std::size_t& closed);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same
 /// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
 std::size_t propagate_keys(RasterContext& ctx);

@@ -722,3 +722,39 @@ TEST(Raster, GutterPassesMatchTheirDefinition) {
 
 }  // namespace
 }  // namespace lapflow
+
+
+namespace lapflow {
+namespace {
+
+// RasterOptions::small_hole: holes no wider than small_hole x r are closed by
+// the patches around them, wider ones still get a patch, and coverage stays
+// complete either way.
+TEST(Raster, NarrowHolesAreClosedByTheirNeighboursWideOnesGetAPatch) {
+  RasterOptions o;
+  o.mipmap = false;
+  Scene paper = random_scene(false, 40, 11);
+  const FrameTextures a = paper.run(o);
+  ASSERT_GT(a.stats.patches_born, 0u);  // the scene has holes
+  EXPECT_EQ(a.stats.closed_texels, 0u);
+
+  o.small_hole = 0.5;
+  Scene closing = random_scene(false, 40, 11);
+  const FrameTextures b = closing.run(o);
+  EXPECT_EQ(b.stats.covered_texels, b.stats.chart_texels);
+  EXPECT_GT(b.stats.closed_texels, 0u);
+  EXPECT_LT(b.stats.patches_born, a.stats.patches_born);
+  EXPECT_EQ(b.stats.forced_texels, 0u);  // closed texels are counted apart from failures
+  EXPECT_LT(closing.patches.patches.size(), paper.patches.patches.size());
+
+  // A hole that is its whole chart has no neighbour to close it: it gets
+  // patches whatever small_hole says.
+  o.small_hole = 100;
+  Scene empty = random_scene(true, 0, 5);
+  const FrameTextures c = empty.run(o);
+  EXPECT_GT(c.stats.patches_born, 0u);
+  EXPECT_EQ(c.stats.covered_texels, c.stats.chart_texels);
+}
+
+}  // namespace
+}  // namespace lapflow

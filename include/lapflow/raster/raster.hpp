@@ -43,6 +43,10 @@ struct RasterOptions {
   bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
   int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
   std::size_t max_hole_patches = 200000;  ///< guard on patches born per frame
+  /// Holes no wider than this times r are closed by the patches around them
+  /// instead of a new patch (0 = every hole gets a patch, as in the paper).
+  /// docs/temporal.md says why.
+  double small_hole = 0.0;
 };
 
 /// Box-filtered mip pyramid of the exemplar's colour and displacement,
@@ -89,6 +93,7 @@ struct RasterStats {
   std::size_t chart_texels = 0;
   std::size_t covered_texels = 0;  ///< chart texels with a patch (kept, or forced); Blend: summed w above 1e-3, or forced
   std::size_t forced_texels = 0;   ///< chart texels given the patch of a neighbour because hole filling could not cover them
+  std::size_t closed_texels = 0;   ///< chart texels of small holes closed by their neighbours (RasterOptions::small_hole)
   std::size_t patches_born = 0;    ///< by hole filling
   std::size_t patches_retired = 0;
   std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
