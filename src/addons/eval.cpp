@@ -632,6 +632,92 @@ struct PairSettings {
   double dt = 0, radius = 0, bake_min_speed = 0, rest_speed = 0;
 };
 
+/// True when chart texel (x, y) and its 8 neighbours are all chart texels of
+/// `chart` covered by `patch`: the texel is more than a texel from a patch
+/// border, a chart border and any uncovered texel.
+bool inside_patch(const FrameData& f, int x, int y, int chart, int32_t patch) {
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int32_t j = f.slot_at(x + dx, y + dy);
+      if (j < 0 || f.patch[j] != patch || !f.covered[j] || f.chart_of_slot(std::size_t(j)) != chart) return false;
+    }
+  return true;
+}
+
+/// Drift at rest at fixed surface points (issue 12's definition). The points
+/// are this frame's covered chart texels at rest (|v| <= rest speed); each is
+/// located on the previous frame's surface by closest point, whose
+/// barycentrics give the previous atlas uv and the texel holding it. A point
+/// within a texel of a patch border in either frame (its 3x3 texels not all
+/// one patch of one chart, covered) is left out: there only where each
+/// frame's atlas happens to sample the surface decides which side it falls
+/// on. A point farther from the previous surface than a texel, or than
+/// rest_speed * dt when that is more, is left out too (the surface changed
+/// there). The others changed when the patch
+/// differs or (u, v) moved by more than one texel.
+void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m) {
+  const std::size_t count = cur.texels.size();
+  const double two_r = 2 * s.radius;
+  const double uv_texel = prev.texel_world / two_r;  // one texel of the previous frame in patch (u,v) units
+  // A point at rest moves at most rest_speed * dt a frame (2 mm at 5 cm/s
+  // and 24 fps, more than a texel at 1024^2 on viscous_drop); a texel when
+  // that is less. Farther, the surface changed there.
+  const double reach = std::max(prev.texel_world, s.rest_speed * s.dt);
+  struct Part {
+    std::size_t compared = 0, border = 0, far = 0, changed = 0;
+  };
+  const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
+    Vec3 J[2];
+    for (std::size_t i = b; i < e; ++i) {
+      if (cur.patch[i] < 0 || !(norm(velocity_at(cur, i, cur.position[i])) <= s.rest_speed)) continue;
+      if (!inside_patch(cur, cur.x_of(i), cur.y_of(i), cur.chart_of_slot(i), cur.patch[i])) {
+        ++p.border;
+        continue;
+      }
+      const ClosestHit hit = prev.query->closest(cur.position[i], reach);
+      if (!hit.found) {
+        ++p.far;
+        continue;
+      }
+      const std::size_t t = std::size_t(hit.triangle);
+      const Vec2 uv = prev.uv.corner_uv[3 * t] * (1 - hit.b1 - hit.b2) + prev.uv.corner_uv[3 * t + 1] * hit.b1 +
+                      prev.uv.corner_uv[3 * t + 2] * hit.b2;
+      const int x = int(std::floor(uv.x * prev.n)), y = int(std::floor((1 - uv.y) * prev.n));
+      const int32_t j = prev.slot_at(x, y);
+      if (j < 0 || prev.chart_of_slot(std::size_t(j)) != prev.chart_of_triangle[t] ||
+          !inside_patch(prev, x, y, prev.chart_of_triangle[t], prev.patch[j])) {
+        ++p.border;
+        continue;
+      }
+      ++p.compared;
+      bool changed = prev.patch[j] != cur.patch[i];
+      if (!changed) {
+        // The previous frame's (u,v) at the located point: its texel's, moved
+        // by the patch Jacobian (its neighbours are all of this patch).
+        double u = prev.pu[j], v = prev.pv[j];
+        if (patch_jacobian(prev, std::size_t(j), two_r, J)) {
+          const Vec2 d = jacobian_solve(J, hit.point - prev.position[j]);
+          u += d.x / two_r;
+          v += d.y / two_r;
+        }
+        changed = std::hypot(cur.pu[i] - u, cur.pv[i] - v) > uv_texel;
+      }
+      p.changed += changed;
+    }
+  });
+  Part t;
+  for (const Part& p : parts) {
+    t.compared += p.compared;
+    t.border += p.border;
+    t.far += p.far;
+    t.changed += p.changed;
+  }
+  m.drift_points = t.compared;
+  m.drift_border_points = t.border;
+  m.drift_far_points = t.far;
+  m.drift = t.compared ? double(t.changed) / double(t.compared) : kNoValue;
+}
+
 void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m) {
   const std::size_t count = cur.texels.size();
   const double two_r = 2 * s.radius;
@@ -672,11 +758,13 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   m.flow_p90 = quantile(r, 0.9);
   m.flow_median = quantile(r, 0.5);
 
-  // Popping and drift at rest: each covered texel goes back along its
-  // velocity to the previous frame's surface. A texel whose patch point was
-  // visible on the previous frame (matched above) has not popped, whatever
-  // the back-advected point says: first-order back-advection misses by
-  // |a| dt^2 / 2 under acceleration, which would count patch borders as pops.
+  // Popping and per-texel drift at rest (drift_texel; it counts patch
+  // borders, which rest_point_drift leaves out): each covered texel goes back
+  // along its velocity to the previous frame's surface. A texel whose patch
+  // point was visible on the previous frame (matched above) has not popped,
+  // whatever the back-advected point says: first-order back-advection misses
+  // by |a| dt^2 / 2 under acceleration, which would count patch borders as
+  // pops.
   struct Part {
     std::size_t compared = 0, rest = 0, drifted = 0;
     double w = 0, w_popped = 0;
@@ -726,7 +814,9 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   m.popping_texels = t.compared;
   m.popping = t.w > 0 ? t.w_popped / t.w : kNoValue;
   m.rest_texels = t.rest;
-  m.drift = t.rest ? double(t.drifted) / double(t.rest) : kNoValue;
+  m.drift_texel = t.rest ? double(t.drifted) / double(t.rest) : kNoValue;
+
+  rest_point_drift(prev, cur, s, m);
 }
 
 /// Births and deaths per frame from NAME.stats.jsonl (absent file: none).
@@ -770,6 +860,7 @@ const std::vector<MetricDef>& metric_defs() {
       {"born", [](const FrameMetrics& m) { return m.born ? double(*m.born) : kNoValue; }},
       {"died", [](const FrameMetrics& m) { return m.died ? double(*m.died) : kNoValue; }},
       {"drift", [](const FrameMetrics& m) { return m.drift; }},
+      {"drift_texel", [](const FrameMetrics& m) { return m.drift_texel; }},
       {"distortion_median", [](const FrameMetrics& m) { return m.distortion_median; }},
       {"distortion_p90", [](const FrameMetrics& m) { return m.distortion_p90; }},
       {"distortion_p99", [](const FrameMetrics& m) { return m.distortion_p99; }},
@@ -887,8 +978,12 @@ std::string eval_report_json(const EvalReport& r) {
         {"popping", number(m.popping)},
         {"born", m.born ? nlohmann::json(*m.born) : nlohmann::json(nullptr)},
         {"died", m.died ? nlohmann::json(*m.died) : nlohmann::json(nullptr)},
-        {"rest_texels", m.rest_texels},
         {"drift", number(m.drift)},
+        {"drift_points", m.drift_points},
+        {"drift_border_points", m.drift_border_points},
+        {"drift_far_points", m.drift_far_points},
+        {"rest_texels", m.rest_texels},
+        {"drift_texel", number(m.drift_texel)},
         {"distortion_texels", m.distortion_texels},
         {"distortion_median", number(m.distortion_median)},
         {"distortion_p90", number(m.distortion_p90)},
@@ -928,21 +1023,24 @@ std::string cell(double v, const char* spec, int width) {
 std::string eval_report_table(const EvalReport& r) {
   std::string out = fmt::format("{} ({} mode) in {}\nexemplar {} | atlas {} | r = {:.4g} m | {} fps | rest below {:.4g} m/s\n\n",
                                 r.name, r.mode, r.dir, r.exemplar, r.resolution, r.radius, r.fps, r.rest_speed);
-  out += fmt::format("{:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6} {:>8} {:>7} {:>7} {:>7}\n", "frame",
-                     "cover%", "contrast", "hist W1", "SW", "flow50", "flow90", "pop%", "born", "died", "drift%",
-                     "delta50", "delta90", "delta99");
+  out += fmt::format("{:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6} {:>8} {:>8} {:>7} {:>7} {:>7}\n",
+                     "frame", "cover%", "contrast", "hist W1", "SW", "flow50", "flow90", "pop%", "born", "died",
+                     "drift%", "drtex%", "delta50", "delta90", "delta99");
   auto pct = [](double v) { return std::isfinite(v) ? 100 * v : v; };
   auto row = [&](const std::string& label, double cov, double con, double hist, double sw, double f50, double f90,
-                 double pop, double born, double died, double drift, double d50, double d90, double dmx) {
-    return fmt::format("{:>6} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", label, cell(pct(cov), ".2f", 8),
+                 double pop, double born, double died, double drift, double drift_texel, double d50, double d90,
+                 double dmx) {
+    return fmt::format("{:>6} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", label, cell(pct(cov), ".2f", 8),
                        cell(con, ".3f", 8), cell(hist, ".4f", 8), cell(sw, ".4f", 8), cell(f50, ".3f", 8),
                        cell(f90, ".3f", 8), cell(pct(pop), ".2f", 8), cell(born, ".0f", 6), cell(died, ".0f", 6),
-                       cell(pct(drift), ".2f", 8), cell(d50, ".2f", 7), cell(d90, ".2f", 7), cell(dmx, ".2f", 7));
+                       cell(pct(drift), ".2f", 8), cell(pct(drift_texel), ".2f", 8), cell(d50, ".2f", 7),
+                       cell(d90, ".2f", 7), cell(dmx, ".2f", 7));
   };
   for (const FrameMetrics& m : r.frames)
     out += row(std::to_string(m.frame), m.coverage, m.contrast, m.histogram_distance, m.sliced_wasserstein,
                m.flow_median, m.flow_p90, m.popping, m.born ? double(*m.born) : kNoValue,
-               m.died ? double(*m.died) : kNoValue, m.drift, m.distortion_median, m.distortion_p90, m.distortion_p99);
+               m.died ? double(*m.died) : kNoValue, m.drift, m.drift_texel, m.distortion_median, m.distortion_p90,
+               m.distortion_p99);
   std::map<std::string, const MetricSummary*> s;
   for (const MetricSummary& x : r.summary) s[x.key] = &x;
   auto get = [&](const char* key, double MetricSummary::*field) { return s.count(key) ? s[key]->*field : kNoValue; };
@@ -952,7 +1050,7 @@ std::string eval_report_table(const EvalReport& r) {
     out += row(label, get("coverage", field), get("contrast", field), get("histogram_distance", field),
                get("sliced_wasserstein", field), get("flow_median", field), get("flow_p90", field),
                get("popping", field), get("born", field), get("died", field), get("drift", field),
-               get("distortion_median", field), get("distortion_p90", field), get("distortion_p99", field));
+               get("drift_texel", field), get("distortion_median", field), get("distortion_p90", field), get("distortion_p99", field));
   return out;
 }
 
@@ -969,14 +1067,17 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
   const fs::path folder(dir);
   const std::string tag = fmt::format(".eval_plot_{}", ::getpid());
   const fs::path data = folder / (tag + ".dat"), script = folder / (tag + ".gp");
-  std::string text = "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax d99\n";
+  std::string text =
+      "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax d99 "
+      "drift_texel\n";
   auto v = [](double x) { return std::isfinite(x) ? fmt::format("{:.9g}", x) : std::string("NaN"); };
   for (const FrameMetrics& m : r.frames)
-    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
+    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
                         v(m.histogram_w1[0]), v(m.histogram_w1[1]), v(m.histogram_w1[2]), v(m.histogram_distance),
                         v(m.sliced_wasserstein), v(m.flow_median), v(m.flow_p90), v(m.popping),
                         v(m.born ? double(*m.born) : kNoValue), v(m.died ? double(*m.died) : kNoValue), v(m.drift),
-                        v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max), v(m.distortion_p99));
+                        v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max), v(m.distortion_p99),
+                        v(m.drift_texel));
   write_text_atomically(data.string(), text);
 
   struct Plot {
@@ -1005,9 +1106,10 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
        fmt::format("{0} using 1:($11*100) with linespoints title 'popping %', {0} using 1:12 axes x1y2 with "
                    "linespoints title 'born', {0} using 1:13 axes x1y2 with linespoints title 'died'", d),
        [](const FrameMetrics& m) { return m.popping; }},
-      {"drift.png", "Drift at rest", "rest texels whose texture changed (%)",
-       fmt::format("{} using 1:($14*100) with linespoints title 'drift'", d),
-       [](const FrameMetrics& m) { return m.drift; }},
+      {"drift.png", "Drift at rest", "rest points whose texture changed (%)",
+       fmt::format("{0} using 1:($14*100) with linespoints title 'drift (fixed points)', {0} using "
+                   "1:($19*100) with linespoints title 'drift_texel (per texel)'", d),
+       [](const FrameMetrics& m) { return std::isfinite(m.drift) ? m.drift : m.drift_texel; }},
       {"distortion.png", "Distortion delta = max(s1, 1/s2)", "delta",
        lines({{15, "median"}, {16, "p90"}, {18, "p99"}}),
        [](const FrameMetrics& m) { return m.distortion_median; }},

@@ -48,11 +48,15 @@ bool in_a(int x, int y) { return x < y; }
 bool in_b(int x, int y) { return x > y; }
 bool uncovered(int x, int y) { return x == 3 && (y == 0 || y == 1); }
 
-void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
-  // Exemplar: 2x2 linear greys 0 1 / 1 0 (luminance std 0.5).
+/// Exemplar ex.exr: 2x2 linear greys 0 1 / 1 0 (luminance std 0.5).
+void write_toy_exemplar(const TempDir& dir) {
   Image ex(2, 2, 3, 0.f);
   for (int c = 0; c < 3; ++c) ex.at(1, 0, c) = ex.at(0, 1, c) = 1.f;
   write_exr(dir / "ex.exr", ex, {"R", "G", "B"}, {ExrPixelType::Float, ExrCompression::Zip});
+}
+
+void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
+  write_toy_exemplar(dir);
 
   std::string stats;
   for (std::size_t k = 0; k < frames.size(); ++k) {
@@ -110,6 +114,69 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
   write_bake_manifest(m, bake_manifest_path(dir.str(), "toy"));
 }
 
+// ---- the grid toy: drift at fixed points ------------------------------------
+//
+// An 8x8 atlas over one chart: the uv square split along (1,0)-(0,1), 3D =
+// 0.8 (u, v, 0) + offset, so a texel is 0.1 m; with r = 0.4 the patch
+// coordinates are the atlas uv and one texel is 0.125 of (u,v). Patch 1 holds
+// columns 0-3, patch `right_patch` columns 4-7. The texels more than a texel
+// from a patch border or the chart's edge are columns 1-2 and 5-6 of rows 1-6:
+// 24 of the 64.
+constexpr double kGridR = 0.4;
+
+struct GridFrame {
+  int right_patch = 2;
+  Vec3 offset;
+  std::vector<std::pair<std::array<int, 2>, Vec2>> shift;  ///< texel (x, y) -> (u,v) offset in texels
+};
+
+void write_grid_toy_bake(const TempDir& dir, const std::vector<GridFrame>& frames) {
+  write_toy_exemplar(dir);
+  std::string stats;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const int f = int(k) + 1;
+    const GridFrame& gf = frames[k];
+    TriMesh mesh;
+    const Vec2 uv[4] = {{0, 0}, {1, 0}, {0, 1}, {1, 1}};
+    for (const Vec2& t : uv) mesh.positions.push_back(Vec3{0.8 * t.x, 0.8 * t.y, 0} + gf.offset);
+    mesh.triangles = {{0, 1, 2}, {3, 2, 1}};
+    write_ply(dir / fmt::format("in.{:04d}.ply", f), mesh);
+    std::string obj;
+    for (const Vec3& p : mesh.positions) obj += fmt::format("v {:.17g} {:.17g} {:.17g}\n", p.x, p.y, p.z);
+    for (const Vec2& t : uv) obj += fmt::format("vt {:.17g} {:.17g}\n", t.x, t.y);
+    obj += "f 1/1 2/2 3/3\nf 4/4 3/3 2/2\n";
+    test::write_bytes(dir / fmt::format("grid.{:04d}.obj", f), obj);
+
+    Image color(8, 8, 4, 0.5f), aov(8, 8, 4, 0.f);
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 8; ++x) {
+        Vec2 d{};
+        for (const auto& [texel, by] : gf.shift)
+          if (texel[0] == x && texel[1] == y) d = by;
+        color.at(x, y, 3) = 1;
+        aov.at(x, y, 0) = float(x < 4 ? 1 : gf.right_patch);
+        aov.at(x, y, 1) = float((x + 0.5 + d.x) / 8);
+        aov.at(x, y, 2) = float(1 - (y + 0.5) / 8 + d.y / 8);
+        aov.at(x, y, 3) = 1;
+      }
+    const ExrOptions exact{ExrPixelType::Float, ExrCompression::Zip};
+    write_exr(dir / fmt::format("grid.color.{:04d}.exr", f), color, {"R", "G", "B", "A"}, exact);
+    write_exr(dir / fmt::format("grid.aov.{:04d}.exr", f), aov, {"patch_id", "u", "v", "w"}, exact);
+    stats += fmt::format(R"({{"frame":{},"patches":{{"born":0,"retired":0,"lost":0}}}})", f) + "\n";
+  }
+  test::write_bytes(dir / "grid.stats.jsonl", stats);
+  BakeManifest m;
+  m.name = "grid";
+  m.mesh_pattern = dir / "in.%04d.ply";
+  for (std::size_t k = 0; k < frames.size(); ++k) m.frames.push_back(int(k) + 1);
+  m.fps = 24;
+  m.exemplar_color = dir / "ex.exr";
+  m.radius = kGridR;
+  m.resolution = 8;
+  m.aov = true;
+  write_bake_manifest(m, bake_manifest_path(dir.str(), "grid"));
+}
+
 // ---- small real bakes -----------------------------------------------------
 
 BakeOptions small_bake(const std::string& meshes, const std::string& out) {
@@ -129,6 +196,41 @@ void write_sphere_sequence(const std::string& dir, int frames, const Vec3& veloc
   for (int f = 1; f <= frames; ++f) {
     TriMesh m = test::icosphere(3, 0.5, velocity * (double(f - 1) / 24));
     if (!no_velocity) m.velocities.assign(m.positions.size(), velocity);
+    write_ply(fmt::format("{}/m.{:04d}.ply", dir, f), m);
+  }
+}
+
+/// A still wavy sheet z = 0.04 sin(2 pi x) sin(2 pi y) over [0,1]^2,
+/// triangulated from a 48x48 grid whose vertices are jittered by up to 0.3 of
+/// a cell (boundary vertices along their edge, corners fixed), with another
+/// jitter and other diagonals every frame: the same shape, a new mesh each
+/// frame (the chords stay within 0.1 mm of the shape), no velocity.
+void write_remeshed_sheet(const std::string& dir, int frames) {
+  constexpr int kCells = 48;
+  const double h = 1.0 / kCells;
+  for (int f = 1; f <= frames; ++f) {
+    TriMesh m;
+    auto jitter = [&](int i, int j, int axis) {
+      return 0.6 * (hash_to_unit(hash64(uint64_t(f), uint64_t(i), uint64_t(j), uint64_t(axis))) - 0.5) * h;
+    };
+    for (int j = 0; j <= kCells; ++j)
+      for (int i = 0; i <= kCells; ++i) {
+        const double x = i * h + (i > 0 && i < kCells ? jitter(i, j, 0) : 0);
+        const double y = j * h + (j > 0 && j < kCells ? jitter(i, j, 1) : 0);
+        m.positions.push_back({x, y, 0.04 * std::sin(2 * M_PI * x) * std::sin(2 * M_PI * y)});
+      }
+    auto id = [&](int i, int j) { return int32_t(j * (kCells + 1) + i); };
+    for (int j = 0; j < kCells; ++j)
+      for (int i = 0; i < kCells; ++i) {
+        const int32_t a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+        if ((hash64(uint64_t(f), uint64_t(i), uint64_t(j), 7) & 1) != 0) {
+          m.triangles.push_back({a, b, c});
+          m.triangles.push_back({a, c, d});
+        } else {
+          m.triangles.push_back({a, b, d});
+          m.triangles.push_back({b, c, d});
+        }
+      }
     write_ply(fmt::format("{}/m.{:04d}.ply", dir, f), m);
   }
 }
@@ -175,16 +277,60 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_EQ(*f1.died, 0u);
 
   // Frame 2: B's patch became 11: a third of the texels but 2/3 of the area
-  // popped; everything is at rest, and 4 of the 10 texels changed.
+  // popped; everything is at rest, and 4 of the 10 texels changed (per
+  // texel). At fixed points nothing is compared: in a 4x4 atlas cut along its
+  // diagonal no texel has its 3x3 neighbourhood in one patch, so every rest
+  // point lies within a texel of a border.
   EXPECT_EQ(f2.popping_texels, 10u);
   EXPECT_NEAR(f2.popping, 12.0 / 18.0, 1e-9);
   EXPECT_EQ(f2.rest_texels, 10u);
-  EXPECT_NEAR(f2.drift, 0.4, 1e-12);
+  EXPECT_NEAR(f2.drift_texel, 0.4, 1e-12);
+  EXPECT_EQ(f2.drift_points, 0u);
+  EXPECT_EQ(f2.drift_border_points, 10u);
+  EXPECT_EQ(f2.drift_far_points, 0u);
+  EXPECT_TRUE(std::isnan(f2.drift));
   EXPECT_EQ(f2.flow_texels, 0u);  // nothing moves: no flow ratio
   EXPECT_EQ(*f2.born, 1u);
   EXPECT_EQ(*f2.died, 1u);
   EXPECT_EQ(r.born, 3u);
   EXPECT_EQ(r.died, 1u);
+}
+
+TEST(Eval, GridToyDriftAtFixedPointsLeavesBordersOut) {
+  TempDir dir("eval_grid");
+  // Frame 2: the right patch is renamed (a new patch there), texel (1,2)'s
+  // (u,v) moves by 0.7 texel and (2,5)'s by 2 texels. Frame 3: the same
+  // texture on a surface lifted by 1.5 texels.
+  GridFrame moved{5, {}, {{{1, 2}, {0.7, 0}}, {{2, 5}, {0, 2}}}};
+  GridFrame lifted = moved;
+  lifted.offset = {0, 0, 0.15};
+  write_grid_toy_bake(dir, {GridFrame{}, moved, lifted});
+  const EvalReport r = evaluate_bake(dir.str());
+  ASSERT_EQ(r.frames.size(), 3u);
+  EXPECT_EQ(r.frames[0].chart_texels, 64u);
+  EXPECT_NEAR(r.frames[0].texel_world_size, 0.1, 1e-12);
+  EXPECT_TRUE(std::isnan(r.frames[0].drift));
+
+  // Frame 2 at fixed points: 24 points off the borders; the 12 of the right
+  // patch changed patch, (2,5) moved 2 texels, (1,2) 0.7 (under one texel).
+  const FrameMetrics& f2 = r.frames[1];
+  EXPECT_EQ(f2.rest_texels, 64u);
+  EXPECT_EQ(f2.drift_points, 24u);
+  EXPECT_EQ(f2.drift_border_points, 40u);
+  EXPECT_EQ(f2.drift_far_points, 0u);
+  EXPECT_NEAR(f2.drift, 13.0 / 24.0, 1e-12);
+  // Per texel: all 32 of the right patch, (2,5), and (1,2) (over half a texel).
+  EXPECT_NEAR(f2.drift_texel, 34.0 / 64.0, 1e-12);
+
+  // Frame 3: every point off the borders is 1.5 texels from frame 2's
+  // surface: none is compared. Per texel, the back-projected points find the
+  // same texture.
+  const FrameMetrics& f3 = r.frames[2];
+  EXPECT_EQ(f3.drift_points, 0u);
+  EXPECT_EQ(f3.drift_border_points, 40u);
+  EXPECT_EQ(f3.drift_far_points, 24u);
+  EXPECT_TRUE(std::isnan(f3.drift));
+  EXPECT_EQ(f3.drift_texel, 0.0);
 }
 
 TEST(Eval, ToyFlowErrorIsTheRelativeMismatch) {
@@ -247,10 +393,39 @@ TEST(Eval, StillSceneHasNoDriftAndNoPopping) {
     EXPECT_GT(m.rest_texels, 1000u);
     EXPECT_EQ(m.rest_texels, m.covered_texels) << "frame " << m.frame;
     EXPECT_EQ(m.drift, 0.0) << "frame " << m.frame;
+    EXPECT_GT(m.drift_points, m.rest_texels / 2) << "frame " << m.frame;
+    EXPECT_EQ(m.drift_texel, 0.0) << "frame " << m.frame;
     EXPECT_EQ(m.popping, 0.0) << "frame " << m.frame;
     EXPECT_EQ(m.flow_texels, 0u);
     EXPECT_EQ(*m.born, 0u);
     EXPECT_EQ(*m.died, 0u);
+  }
+}
+
+TEST(Eval, StillRemeshedSceneDriftsLittleAtFixedPointsButPerTexelCountsBorders) {
+  // The same still sheet meshed anew every frame: each frame's atlas samples
+  // the surface at other points, so per texel the sides of patch borders
+  // flip, while at fixed points off the borders the texture holds.
+  TempDir in("eval_remesh_in"), out("eval_remesh_out");
+  write_remeshed_sheet(in.str(), 4);
+  BakeOptions o = small_bake(in.str(), out.str());
+  o.allow_zero_velocity = true;
+  run_bake(o);
+  const EvalReport r = evaluate_bake(out.str());
+  ASSERT_EQ(r.frames.size(), 4u);
+  for (std::size_t k = 1; k < 4; ++k) {
+    const FrameMetrics& m = r.frames[k];
+    // Every covered texel is a rest point; none is far from the previous
+    // surface (the chords stay within 0.1 mm of the shape); enough are off the
+    // borders to measure (about 40% at this small patch size).
+    EXPECT_EQ(m.drift_points + m.drift_border_points + m.drift_far_points, m.covered_texels) << "frame " << m.frame;
+    EXPECT_EQ(m.drift_far_points, 0u) << "frame " << m.frame;
+    EXPECT_GT(double(m.drift_points), 0.25 * double(m.covered_texels)) << "frame " << m.frame;
+    // Measured: drift 0 on frames 2-4, drift_texel 6.2-7.1%. The per-texel
+    // figure reads patch borders, where a point's side depends on where each
+    // atlas samples the surface, even when the texture holds still.
+    EXPECT_LT(m.drift, 0.001) << "frame " << m.frame;
+    EXPECT_GT(m.drift_texel, 0.03) << "frame " << m.frame;
   }
 }
 

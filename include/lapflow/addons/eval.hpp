@@ -1,11 +1,12 @@
 #pragma once
 /// \file eval.hpp Quality metrics of a bake (`lapflow eval`, docs/eval.md):
 /// coverage, contrast (ghosting), fidelity to the exemplar, agreement of the
-/// texture's motion with the input velocity, popping, drift at rest and
-/// distortion, per frame and over the sequence. Everything is measured from
-/// the files of a bake folder (NAME.bake.json, UV meshes, colour atlases, the
-/// AOVs of `bake --aov`, NAME.stats.jsonl) and the input meshes the manifest
-/// names. Deterministic at any thread count.
+/// texture's motion with the input velocity, popping, drift at rest (at fixed
+/// surface points, and the former per-texel figure) and distortion, per frame
+/// and over the sequence. Everything is measured from the files of a bake
+/// folder (NAME.bake.json, UV meshes, colour atlases, the AOVs of
+/// `bake --aov`, NAME.stats.jsonl) and the input meshes the manifest names.
+/// Deterministic at any thread count.
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -60,10 +61,25 @@ struct FrameMetrics {
   std::size_t popping_texels = 0;
   double popping = kNoValue;
   std::optional<std::size_t> born, died;  ///< from NAME.stats.jsonl (died = retired + lost)
-  // Drift at rest: share of texels with |v| <= min_speed whose texture
-  // (patch, or (u,v) by more than half a texel) differs from the previous frame's at that point.
-  std::size_t rest_texels = 0;
+  // Drift at rest, at fixed surface points: this frame's covered chart
+  // texels with |v| <= min_speed, each located on the previous frame's mesh
+  // by closest point (then barycentrics, atlas uv, the texel there). Points
+  // within a texel of a patch border in either frame (3x3 texels not all one
+  // covered patch of one chart) are left out, and so are points farther from
+  // the previous surface than max(one texel, min_speed * dt). drift = share
+  // of the compared points whose patch differs or whose (u,v) moved by more
+  // than one texel. drift_points + drift_border_points + drift_far_points =
+  // the texels with a patch at rest.
+  std::size_t drift_points = 0, drift_border_points = 0, drift_far_points = 0;
   double drift = kNoValue;
+  // The former per-texel drift, kept for comparison: share of the rest
+  // texels whose back-advected point on the previous frame has another
+  // patch, or (u,v) off by more than half a texel. It counts patch borders,
+  // where only each frame's atlas sampling decides the side a point is on,
+  // and goes back along input velocities below the bake's --min-speed,
+  // which the bake treated as zero.
+  std::size_t rest_texels = 0;
+  double drift_texel = kNoValue;
   // Distortion: delta = max(s1, 1/s2) of the map (u,v)*2r -> surface,
   // estimated from neighbouring texels of one patch and chart.
   std::size_t distortion_texels = 0;
