@@ -102,6 +102,8 @@ void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats&
   st.seconds_raster = st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_retire + st.seconds_dilate;
   st.patches_born += r.patches_born;
   st.patches_retired = r.patches_retired;
+  st.retired_eroded = r.retired_eroded;
+  st.retired_hidden = r.retired_hidden;
   st.patches_alive = patches.patches.size();
   st.chart_texels = r.chart_texels;
   st.forced_texels = r.forced_texels;
@@ -123,7 +125,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   const BakeManifest manifest = make_bake_manifest(o, frames);
   write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
 
-  detail::FrameReader reader(frame_source(o), o.atlas, frames, o.prefetch_read);
+  detail::FrameReader reader(o, frames);
   detail::FrameWriter writer(o, manifest, on_frame);
   PatchSet patches;  // the state that carries over from frame to frame
   std::shared_ptr<const Frame> prev;

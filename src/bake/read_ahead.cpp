@@ -6,8 +6,8 @@
 
 namespace lapflow::detail {
 
-FrameReader::FrameReader(const FrameSource& source, const AtlasOptions& atlas, std::vector<int> frames, bool ahead)
-    : source_(source), atlas_(atlas), frames_(std::move(frames)), ahead_(ahead) {
+FrameReader::FrameReader(const BakeOptions& options, std::vector<int> frames)
+    : options_(options), source_(frame_source(options)), frames_(std::move(frames)), ahead_(options.prefetch_read) {
   if (ahead_) start(0);
 }
 
@@ -16,8 +16,9 @@ void FrameReader::start(std::size_t index) {
   pending_ = std::async(ahead_ ? std::launch::async : std::launch::deferred, [this, f = frames_[index]] {
     std::shared_ptr<Frame> frame = load_frame(source_, f);
     Stopwatch clock;
-    frame->atlas = build_surface_atlas(frame->mesh, atlas_);
+    frame->atlas = build_surface_atlas(frame->mesh, options_.atlas);
     frame->stats.seconds_atlas = clock.lap();
+    frame->stats.fresh_seeding = fresh_seeding_count(frame->mesh, frame->number, options_.patch, options_.seeding);
     return frame;
   });
 }

@@ -6,16 +6,17 @@
 #include <memory>
 #include <vector>
 
-#include "lapflow/atlas/atlas.hpp"
-#include "lapflow/bake/frame.hpp"
+#include "lapflow/bake/bake.hpp"
 
 namespace lapflow::detail {
 
 class FrameReader {
  public:
-  /// Reads `frames` in order from `source`, each with its atlas; `ahead`
-  /// starts each read while the previous frame is still in use.
-  FrameReader(const FrameSource& source, const AtlasOptions& atlas, std::vector<int> frames, bool ahead);
+  /// Reads `frames` in order as `options` say, each with its atlas and the
+  /// size of a fresh seeding (FrameStats::fresh_seeding); with
+  /// BakeOptions::prefetch_read each read starts while the previous frame is
+  /// still in use.
+  FrameReader(const BakeOptions& options, std::vector<int> frames);
   /// The next frame with its atlas built (stats.seconds_atlas is the atlas's
   /// own time). Errors of a frame's reading surface here, in frame order.
   std::shared_ptr<Frame> next();
@@ -23,8 +24,8 @@ class FrameReader {
  private:
   void start(std::size_t index);
 
+  const BakeOptions& options_;
   FrameSource source_;
-  AtlasOptions atlas_;
   std::vector<int> frames_;
   bool ahead_;
   std::size_t next_index_ = 0;

@@ -120,11 +120,24 @@ std::vector<SurfacePoint> seed_points(const TriMesh& mesh, double min_distance, 
   return out;
 }
 
+namespace {
+
+std::vector<SurfacePoint> frame_seed_points(const TriMesh& mesh, int frame, const PatchOptions& options,
+                                            const SeedOptions& seeding) {
+  return seed_points(mesh, seeding.spacing * options.radius, hash64(options.seed, uint64_t(frame), 0x5eedull));
+}
+
+}  // namespace
+
+std::size_t fresh_seeding_count(const TriMesh& mesh, int frame, const PatchOptions& options,
+                                const SeedOptions& seeding) {
+  return frame_seed_points(mesh, frame, options, seeding).size();
+}
+
 void seed_patches(const SurfaceQuery& surface, int frame, const PatchOptions& options, const SeedOptions& seeding,
                   const WeightOptions& weights, PatchSet& patches) {
   const TriMesh& mesh = surface.mesh();
-  const std::vector<SurfacePoint> points =
-      seed_points(mesh, seeding.spacing * options.radius, hash64(options.seed, uint64_t(frame), 0x5eedull));
+  const std::vector<SurfacePoint> points = frame_seed_points(mesh, frame, options, seeding);
   const SurfaceAdjacency adjacency = build_surface_adjacency(mesh);
   std::vector<std::optional<Patch>> created(points.size());
   const uint32_t first_id = patches.next_id;

@@ -768,6 +768,21 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   return out;
 }
 
+namespace {
+
+// A patch that could keep no texel anywhere: the erosion test needs
+// w >= 1 + epsilon - sqrt(F + D) / M >= epsilon, or no triangle is drawn.
+bool eroded_away(const RasterContext& ctx, const Patch& patch) {
+  float max_w = 0;
+  for (float w : patch.weight) max_w = std::max(max_w, w);
+  bool any_drawable = patch.triangle_delta.size() != patch.triangles.size();
+  for (std::size_t t = 0; t < patch.triangle_delta.size() && !any_drawable; ++t)
+    any_drawable = patch.triangle_delta[t] <= ctx.delta_max;
+  return double(max_w) < ctx.erosion.epsilon || !any_drawable;
+}
+
+}  // namespace
+
 void retire_patches(RasterBuffers& r, PatchSet& patches) {
   const RasterContext& ctx = *r.context;
   RasterStats& st = r.stats;
@@ -785,6 +800,7 @@ void retire_patches(RasterBuffers& r, PatchSet& patches) {
     // texel names it.
     if (retire && n == 0 && (!blend || ctx.blend.contributed[p] == 0)) {
       ++st.patches_retired;
+      ++(eroded_away(ctx, patches.patches[p]) ? st.retired_eroded : st.retired_hidden);
       continue;
     }
     kept.push_back(std::move(patches.patches[p]));

@@ -75,7 +75,13 @@ TEST(Bake, EveryChartTexelIsCoveredOnEveryFrame) {
         }
       }
     EXPECT_EQ(alpha, s.chart_texels);
+    // Every retired patch has one cause, and the population has its yardstick.
+    EXPECT_EQ(s.retired_eroded + s.retired_hidden, s.patches_retired);
+    EXPECT_GT(s.fresh_seeding, 0u);
   }
+  // The first frame is seeded: every sample of a fresh seeding became a patch
+  // (the demo's ball has no spot where creation fails), and hole filling may add more.
+  EXPECT_LE(stats[0].fresh_seeding, stats[0].patches_born);
 }
 
 TEST(Bake, IdenticalForOneAndTwoThreads) {

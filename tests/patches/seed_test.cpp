@@ -6,6 +6,7 @@
 
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/patches/patches.hpp"
+#include "lapflow/surface/surface_query.hpp"
 #include "test_helpers.hpp"
 
 using namespace lapflow;
@@ -95,4 +96,24 @@ TEST(PatchesSeed, SameSamplesForAnyThreadCountAndDifferentForAnotherSeed) {
   for (std::size_t i = 0; i < one.size(); ++i) EXPECT_EQ(one[i].position, two[i].position);
   const auto other = seed_points(sphere, 0.1, 6);
   EXPECT_NE(other.front().position, one.front().position);
+}
+
+TEST(PatchesSeed, FreshSeedingCountIsWhatSeedingCreates) {
+  const TriMesh sphere = test::icosphere(4);
+  const SurfaceQuery surface(sphere);
+  PatchOptions po;
+  po.radius = 0.2;
+  po.seed = 3;
+  SeedOptions so;
+  for (int frame : {1, 7}) {
+    PatchSet set;
+    seed_patches(surface, frame, po, so, {}, set);
+    // On a smooth sphere every sample becomes a patch.
+    EXPECT_EQ(fresh_seeding_count(sphere, frame, po, so), set.patches.size()) << "frame " << frame;
+  }
+  so.spacing = 2;  // twice the distance: about a quarter of the samples
+  PatchSet sparse;
+  seed_patches(surface, 1, po, so, {}, sparse);
+  EXPECT_EQ(fresh_seeding_count(sphere, 1, po, so), sparse.patches.size());
+  EXPECT_LT(sparse.patches.size(), fresh_seeding_count(sphere, 1, po, SeedOptions{}) / 2);
 }

@@ -38,6 +38,14 @@ struct FrameStats {
   std::size_t triangles = 0, vertices = 0;
   std::size_t patches_alive = 0, patches_born = 0, patches_retired = 0, patches_lost = 0;
   std::size_t patch_vertices_removed = 0;
+  /// Deaths by cause: lost to projection (patches_lost), and the retired
+  /// ones split into eroded away (no vertex weight reaches epsilon, or every
+  /// triangle over delta-max) and hidden (under older patches: it kept
+  /// nothing visible).
+  std::size_t retired_eroded = 0, retired_hidden = 0;
+  /// Patches a fresh Poisson seeding of this frame would create (the
+  /// population's yardstick).
+  std::size_t fresh_seeding = 0;
   int charts = 0;
   double utilization = 0;
   std::size_t chart_texels = 0;

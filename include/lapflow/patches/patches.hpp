@@ -128,6 +128,11 @@ std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfaceAdja
 std::optional<Patch> create_patch(const SurfaceQuery& surface, const SurfacePoint& at, uint32_t id, int frame,
                                   const PatchOptions& options, const WeightOptions& weights);
 
+/// How many patches seed_patches would create on `mesh` at frame `frame`
+/// (its Poisson samples): the yardstick of a bounded population.
+std::size_t fresh_seeding_count(const TriMesh& mesh, int frame, const PatchOptions& options,
+                                const SeedOptions& seeding);
+
 /// First frame: seeds the whole surface and creates one patch per sample.
 void seed_patches(const SurfaceQuery& surface, int frame, const PatchOptions& options, const SeedOptions& seeding,
                   const WeightOptions& weights, PatchSet& patches);

@@ -96,6 +96,8 @@ struct RasterStats {
   std::size_t closed_texels = 0;   ///< chart texels of small holes closed by their neighbours (RasterOptions::small_hole)
   std::size_t patches_born = 0;    ///< by hole filling
   std::size_t patches_retired = 0;
+  std::size_t retired_eroded = 0;  ///< of those: eroded away (no vertex w reaches epsilon, or every triangle too distorted)
+  std::size_t retired_hidden = 0;  ///< of those: the rest, hidden under older patches
   std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
   std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
   double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
