@@ -329,6 +329,19 @@ Vec2 jacobian_solve(const Vec3 J[2], const Vec3& d) {
   return {(g11 * r0 - g01 * r1) / det, (g00 * r1 - g01 * r0) / det};
 }
 
+/// Frame f's patch (u, v) at surface point x near chart texel i: the
+/// texel's, moved by the patch Jacobian to x (unmoved where it has none).
+Vec2 patch_uv_at(const FrameData& f, std::size_t i, const Vec3& x, double two_r) {
+  double u = f.pu[i], v = f.pv[i];
+  Vec3 J[2];
+  if (patch_jacobian(f, i, two_r, J)) {
+    const Vec2 d = jacobian_solve(J, x - f.position[i]);
+    u += d.x / two_r;
+    v += d.y / two_r;
+  }
+  return {u, v};
+}
+
 // ---- the exemplar at the atlas texel scale ----------------------------------
 
 struct ExemplarStats {
@@ -667,7 +680,6 @@ void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSet
     std::size_t compared = 0, border = 0, far = 0, changed = 0;
   };
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
-    Vec3 J[2];
     for (std::size_t i = b; i < e; ++i) {
       if (cur.patch[i] < 0 || !(norm(velocity_at(cur, i, cur.position[i])) <= s.rest_speed)) continue;
       if (!inside_patch(cur, cur.x_of(i), cur.y_of(i), cur.chart_of_slot(i), cur.patch[i])) {
@@ -692,15 +704,10 @@ void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSet
       ++p.compared;
       bool changed = prev.patch[j] != cur.patch[i];
       if (!changed) {
-        // The previous frame's (u,v) at the located point: its texel's, moved
-        // by the patch Jacobian (its neighbours are all of this patch).
-        double u = prev.pu[j], v = prev.pv[j];
-        if (patch_jacobian(prev, std::size_t(j), two_r, J)) {
-          const Vec2 d = jacobian_solve(J, hit.point - prev.position[j]);
-          u += d.x / two_r;
-          v += d.y / two_r;
-        }
-        changed = std::hypot(cur.pu[i] - u, cur.pv[i] - v) > uv_texel;
+        // The previous frame's (u,v) at the located point (its texel's
+        // neighbours are all of this patch).
+        const Vec2 uv = patch_uv_at(prev, std::size_t(j), hit.point, two_r);
+        changed = std::hypot(cur.pu[i] - uv.x, cur.pv[i] - uv.y) > uv_texel;
       }
       p.changed += changed;
     }
@@ -772,7 +779,6 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   const double reach = 2 * s.radius;
   const double drift_tolerance = 0.5 * uv_texel;
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
-    Vec3 J[2];
     for (std::size_t i = b; i < e; ++i) {
       if (cur.patch[i] < 0) continue;
       const Vec3 v = velocity_at(cur, i, cur.position[i]);
@@ -789,15 +795,9 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
         ++p.rest;
         bool changed = other_patch;
         if (!changed) {
-          // The previous frame's (u,v) at the hit point: its texel's, moved
-          // by the patch Jacobian to the exact point.
-          double u = prev.pu[j], vv = prev.pv[j];
-          if (patch_jacobian(prev, std::size_t(j), two_r, J)) {
-            const Vec2 d = jacobian_solve(J, hit.point - prev.position[j]);
-            u += d.x / two_r;
-            vv += d.y / two_r;
-          }
-          changed = std::hypot(cur.pu[i] - u, cur.pv[i] - vv) > drift_tolerance;
+          // The previous frame's (u,v) at the hit point.
+          const Vec2 uv = patch_uv_at(prev, std::size_t(j), hit.point, two_r);
+          changed = std::hypot(cur.pu[i] - uv.x, cur.pv[i] - uv.y) > drift_tolerance;
         }
         p.drifted += changed;
       }
