@@ -66,15 +66,15 @@ std::size_t vertex_total(const PatchSet& s) {
 }
 
 // Seeding/creation variants: no remeshing, then each remesher, then the
-// tangent-plane resampling (falling back to the fast remesher).
+// tangent-plane resampling (falling back to the isotropic remesher).
 struct CreateVariant {
   bool remesh;
   Remesher remesher;
   const char* label;
 };
 constexpr CreateVariant kCreateVariants[] = {
-    {false, Remesher::Isotropic, " (no remesh)"}, {true, Remesher::CgalIsotropic, " + cgal remesh"}, {true, Remesher::Isotropic, " + fast remesh"},
-    {true, Remesher::Lattice, " + grid"}};
+    {false, Remesher::Isotropic, " (no remesh)"}, {true, Remesher::CgalIsotropic, " + cgal remesh"}, {true, Remesher::Isotropic, " + isotropic remesh"},
+    {true, Remesher::Lattice, " + lattice"}};
 
 void bench_create(const SurfaceQuery& q, double r, const CreateVariant& variant) {
   PatchOptions po;

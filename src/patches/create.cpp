@@ -254,7 +254,7 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
   if (options.remesh && options.remesher == Remesher::Lattice) {
     // Resampling needs the fluid up to one lattice edge beyond r (the
     // triangles within r reach that far); where the cut is no height field
-    // over the tangent plane, the fast remesher takes the usual cut below.
+    // over the tangent plane, the isotropic remesher takes the usual cut below.
     // The remesher's edges lie between 4/5 and 4/3 of its target and average
     // 0.83 of it (0.139 r for r/6 on dam_break); a lattice of 0.8 of the
     // target gives the same vertex density, so the same weights (B_V = 0 on

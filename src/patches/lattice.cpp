@@ -1,4 +1,4 @@
-// Tangent-plane resampling of a new patch (PatchOptions::remesher = Grid): the
+// The lattice: a new patch resampled in its tangent plane (Remesher::Lattice): the
 // cheap alternative to isotropic remeshing where the cut is a height field
 // over p's tangent plane. The cut's fluid triangles are projected to that
 // plane, a regular equilateral lattice centred at p (edge L) is located in
