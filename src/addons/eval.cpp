@@ -774,8 +774,12 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   // pops.
   struct Part {
     std::size_t compared = 0, rest = 0, drifted = 0;
-    double w = 0, w_popped = 0;
+    double w = 0, w_popped = 0, w_popped_born = 0;
   };
+  // Ids grow with birth: a patch newer than every patch of the previous
+  // frame's atlas was born on this frame.
+  int32_t newest_prev = -1;
+  for (const int32_t id : prev.patch) newest_prev = std::max(newest_prev, id);
   const double reach = 2 * s.radius;
   const double drift_tolerance = 0.5 * uv_texel;
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
@@ -790,7 +794,10 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
       const bool other_patch = prev.patch[j] != cur.patch[i], popped = other_patch && !matched[i];
       ++p.compared;
       p.w += w;
-      if (popped) p.w_popped += w;
+      if (popped) {
+        p.w_popped += w;
+        if (cur.patch[i] > newest_prev) p.w_popped_born += w;
+      }
       if (norm(v) <= s.rest_speed) {
         ++p.rest;
         bool changed = other_patch;
@@ -810,18 +817,27 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
     t.drifted += p.drifted;
     t.w += p.w;
     t.w_popped += p.w_popped;
+    t.w_popped_born += p.w_popped_born;
   }
   m.popping_texels = t.compared;
   m.popping = t.w > 0 ? t.w_popped / t.w : kNoValue;
+  m.popping_births = t.w_popped > 0 ? t.w_popped_born / t.w_popped : kNoValue;
   m.rest_texels = t.rest;
   m.drift_texel = t.rest ? double(t.drifted) / double(t.rest) : kNoValue;
 
   rest_point_drift(prev, cur, s, m);
 }
 
-/// Births and deaths per frame from NAME.stats.jsonl (absent file: none).
-std::map<int, std::pair<std::size_t, std::size_t>> read_births_deaths(const BakeManifest& m) {
-  std::map<int, std::pair<std::size_t, std::size_t>> out;
+/// The population of one frame as NAME.stats.jsonl gives it.
+struct Population {
+  std::size_t born = 0, died = 0;
+  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden;
+};
+
+/// The population per frame from NAME.stats.jsonl (absent file: none; fields
+/// older bakes did not write stay empty).
+std::map<int, Population> read_population(const BakeManifest& m) {
+  std::map<int, Population> out;
   const std::string path = (fs::path(m.dir) / (m.name + ".stats.jsonl")).string();
   std::ifstream in(path);
   if (!in) return out;
@@ -833,8 +849,20 @@ std::map<int, std::pair<std::size_t, std::size_t>> read_births_deaths(const Bake
     try {
       const auto j = nlohmann::json::parse(line);
       const auto& p = j.at("patches");
-      out[j.at("frame").get<int>()] = {p.at("born").get<std::size_t>(),
-                                       p.at("retired").get<std::size_t>() + p.at("lost").get<std::size_t>()};
+      Population& pop = out[j.at("frame").get<int>()];
+      pop.born = p.at("born").get<std::size_t>();
+      pop.died = p.at("retired").get<std::size_t>() + p.at("lost").get<std::size_t>();
+      auto optional = [](const nlohmann::json& o, const char* key, std::optional<std::size_t>& to) {
+        if (o.contains(key)) to = o.at(key).get<std::size_t>();
+      };
+      optional(p, "alive", pop.alive);
+      optional(p, "fresh_seeding", pop.fresh_seeding);
+      if (j.contains("deaths")) {
+        const auto& d = j.at("deaths");
+        optional(d, "lost_to_projection", pop.died_projection);
+        optional(d, "eroded_away", pop.died_eroded);
+        optional(d, "hidden", pop.died_hidden);
+      }
     } catch (const nlohmann::json::exception& e) {
       throw InputError(path, fmt::format("line {}: {}", number, e.what()));
     }
@@ -859,6 +887,9 @@ const std::vector<MetricDef>& metric_defs() {
       {"popping", [](const FrameMetrics& m) { return m.popping; }},
       {"born", [](const FrameMetrics& m) { return m.born ? double(*m.born) : kNoValue; }},
       {"died", [](const FrameMetrics& m) { return m.died ? double(*m.died) : kNoValue; }},
+      {"popping_births", [](const FrameMetrics& m) { return m.popping_births; }},
+      {"alive", [](const FrameMetrics& m) { return m.alive ? double(*m.alive) : kNoValue; }},
+      {"fresh_seeding", [](const FrameMetrics& m) { return m.fresh_seeding ? double(*m.fresh_seeding) : kNoValue; }},
       {"drift", [](const FrameMetrics& m) { return m.drift; }},
       {"drift_texel", [](const FrameMetrics& m) { return m.drift_texel; }},
       {"distortion_median", [](const FrameMetrics& m) { return m.distortion_median; }},
@@ -923,7 +954,7 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   if (report.rest_speed < 0) throw UsageError("--min-speed must not be negative");
   ExemplarAtScale exemplar(read_image(report.exemplar));
   report.exemplar_luminance_std = exemplar_stats(exemplar.original()).luminance_std;
-  const auto births = read_births_deaths(m);
+  const auto population = read_population(m);
 
   std::unique_ptr<FrameData> prev;
   for (const int frame : frames) {
@@ -932,7 +963,12 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
     FrameMetrics fm;
     fm.frame = frame;
     frame_metrics(*cur, exemplar, m.radius, o, fm);
-    if (const auto it = births.find(frame); it != births.end()) fm.born = it->second.first, fm.died = it->second.second;
+    if (const auto it = population.find(frame); it != population.end()) {
+      const Population& pop = it->second;
+      fm.born = pop.born, fm.died = pop.died;
+      fm.alive = pop.alive, fm.fresh_seeding = pop.fresh_seeding;
+      fm.died_projection = pop.died_projection, fm.died_eroded = pop.died_eroded, fm.died_hidden = pop.died_hidden;
+    }
     if (prev && std::isfinite(prev->texel_world) && !prev->uv.mesh.empty()) {
       prev->query = std::make_unique<SurfaceQuery>(prev->uv.mesh);
       PairSettings s;
@@ -978,6 +1014,12 @@ std::string eval_report_json(const EvalReport& r) {
         {"popping", number(m.popping)},
         {"born", m.born ? nlohmann::json(*m.born) : nlohmann::json(nullptr)},
         {"died", m.died ? nlohmann::json(*m.died) : nlohmann::json(nullptr)},
+        {"popping_births", number(m.popping_births)},
+        {"alive", m.alive ? nlohmann::json(*m.alive) : nlohmann::json(nullptr)},
+        {"fresh_seeding", m.fresh_seeding ? nlohmann::json(*m.fresh_seeding) : nlohmann::json(nullptr)},
+        {"deaths", {{"lost_to_projection", m.died_projection ? nlohmann::json(*m.died_projection) : nlohmann::json(nullptr)},
+                    {"eroded_away", m.died_eroded ? nlohmann::json(*m.died_eroded) : nlohmann::json(nullptr)},
+                    {"hidden", m.died_hidden ? nlohmann::json(*m.died_hidden) : nlohmann::json(nullptr)}}},
         {"drift", number(m.drift)},
         {"drift_points", m.drift_points},
         {"drift_border_points", m.drift_border_points},
@@ -1051,6 +1093,17 @@ std::string eval_report_table(const EvalReport& r) {
                get("sliced_wasserstein", field), get("flow_median", field), get("flow_p90", field),
                get("popping", field), get("born", field), get("died", field), get("drift", field),
                get("drift_texel", field), get("distortion_median", field), get("distortion_p90", field), get("distortion_p99", field));
+  // The population, when the bake's stats hold it.
+  const double births = get("popping_births", &MetricSummary::mean), alive = get("alive", &MetricSummary::max),
+               fresh = get("fresh_seeding", &MetricSummary::mean);
+  if (std::isfinite(births)) out += fmt::format("\npopping caused by births: {:.1f}% of the popped surface (mean over frames)\n", 100 * births);
+  if (std::isfinite(alive) && std::isfinite(fresh)) {
+    double ratio = 0;
+    for (const FrameMetrics& m : r.frames)
+      if (m.alive && m.fresh_seeding && *m.fresh_seeding > 0)
+        ratio = std::max(ratio, double(*m.alive) / double(*m.fresh_seeding));
+    out += fmt::format("patches alive: at most {:.0f}, at most {:.2f}x a fresh seeding of the same frame\n", alive, ratio);
+  }
   return out;
 }
 
@@ -1069,15 +1122,17 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
   const fs::path data = folder / (tag + ".dat"), script = folder / (tag + ".gp");
   std::string text =
       "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax d99 "
-      "drift_texel\n";
+      "drift_texel alive fresh_seeding died_projection died_eroded died_hidden\n";
   auto v = [](double x) { return std::isfinite(x) ? fmt::format("{:.9g}", x) : std::string("NaN"); };
+  auto n = [&](const std::optional<std::size_t>& x) { return v(x ? double(*x) : kNoValue); };
   for (const FrameMetrics& m : r.frames)
-    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
+    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
                         v(m.histogram_w1[0]), v(m.histogram_w1[1]), v(m.histogram_w1[2]), v(m.histogram_distance),
                         v(m.sliced_wasserstein), v(m.flow_median), v(m.flow_p90), v(m.popping),
                         v(m.born ? double(*m.born) : kNoValue), v(m.died ? double(*m.died) : kNoValue), v(m.drift),
                         v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max), v(m.distortion_p99),
-                        v(m.drift_texel));
+                        v(m.drift_texel), n(m.alive), n(m.fresh_seeding), n(m.died_projection), n(m.died_eroded),
+                        n(m.died_hidden));
   write_text_atomically(data.string(), text);
 
   struct Plot {
@@ -1110,6 +1165,14 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
        fmt::format("{0} using 1:($14*100) with linespoints title 'drift (fixed points)', {0} using "
                    "1:($19*100) with linespoints title 'drift_texel (per texel)'", d),
        [](const FrameMetrics& m) { return std::isfinite(m.drift) ? m.drift : m.drift_texel; }},
+      {"population.png", "Patch population", "patches alive",
+       fmt::format("{0} using 1:20 with linespoints title 'alive', {0} using 1:21 with lines dashtype 2 title "
+                   "'fresh seeding', {0} using 1:($21*1.5) with lines dashtype 3 title '1.5 x fresh seeding', {0} "
+                   "using 1:12 axes x1y2 with linespoints title 'born', {0} using 1:22 axes x1y2 with linespoints "
+                   "title 'died: projection', {0} using 1:23 axes x1y2 with linespoints title 'died: eroded', {0} "
+                   "using 1:24 axes x1y2 with linespoints title 'died: hidden'",
+                   d),
+       [](const FrameMetrics& m) { return m.alive ? double(*m.alive) : kNoValue; }},
       {"distortion.png", "Distortion delta = max(s1, 1/s2)", "delta",
        lines({{15, "median"}, {16, "p90"}, {18, "p99"}}),
        [](const FrameMetrics& m) { return m.distortion_median; }},
@@ -1126,7 +1189,8 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
     const std::string tmp = (folder / (tag + "." + p.file)).string();
     gp += fmt::format("set output '{}'\nset title \"{}: {}\"\nset ylabel \"{}\"\n", tmp, p.title, r.name + " (" + r.mode + ")",
                       p.ylabel);
-    gp += p.file == "popping.png" ? "set y2label 'patches per frame'\nset y2tics\n" : "unset y2label\nunset y2tics\n";
+    gp += p.file == "popping.png" || p.file == "population.png" ? "set y2label 'patches per frame'\nset y2tics\n"
+                                                                : "unset y2label\nunset y2tics\n";
     const bool any = std::any_of(r.frames.begin(), r.frames.end(), [&](const FrameMetrics& m) { return std::isfinite(p.main(m)); });
     if (any) {
       gp += "unset label\nset autoscale y\nplot " + p.plot + "\n";

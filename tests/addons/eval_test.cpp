@@ -97,8 +97,11 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
     const ExrOptions exact{ExrPixelType::Float, ExrCompression::Zip};
     write_exr(dir / fmt::format("toy.color.{:04d}.exr", f), color, {"R", "G", "B", "A"}, exact);
     write_exr(dir / fmt::format("toy.aov.{:04d}.exr", f), aov, {"patch_id", "u", "v", "w"}, exact);
-    stats += fmt::format(R"({{"frame":{},"patches":{{"born":{},"retired":{},"lost":0}}}})", f, f == 1 ? 2 : 1,
-                         f == 1 ? 0 : 1) + "\n";
+    stats += fmt::format(
+                 R"({{"frame":{},"patches":{{"born":{},"retired":{},"lost":0,"alive":2,"fresh_seeding":3}},)"
+                 R"("deaths":{{"lost_to_projection":0,"eroded_away":0,"hidden":{}}}}})",
+                 f, f == 1 ? 2 : 1, f == 1 ? 0 : 1, f == 1 ? 0 : 1) +
+             "\n";
   }
   test::write_bytes(dir / "toy.stats.jsonl", stats);
 
@@ -292,6 +295,15 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_EQ(f2.flow_texels, 0u);  // nothing moves: no flow ratio
   EXPECT_EQ(*f2.born, 1u);
   EXPECT_EQ(*f2.died, 1u);
+  // Patch 11 is newer than every patch of frame 1 (7 and 9): all of the
+  // popping is caused by its birth. The population comes from the stats.
+  EXPECT_EQ(f2.popping_births, 1.0);
+  EXPECT_TRUE(std::isnan(f1.popping_births));
+  EXPECT_EQ(*f2.alive, 2u);
+  EXPECT_EQ(*f2.fresh_seeding, 3u);
+  EXPECT_EQ(*f2.died_hidden, 1u);
+  EXPECT_EQ(*f2.died_eroded, 0u);
+  EXPECT_EQ(*f1.died_hidden, 0u);
   EXPECT_EQ(r.born, 3u);
   EXPECT_EQ(r.died, 1u);
 }
@@ -499,7 +511,7 @@ TEST(Eval, CommandLinePrintsJsonAndWritesPlots) {
             0)
       << err;
   for (const char* name : {"coverage", "contrast", "fidelity", "sliced_wasserstein", "flow", "popping", "drift",
-                           "distortion"}) {
+                           "population", "distortion"}) {
     const std::string png = plots + "/" + name + ".png";
     ASSERT_TRUE(std::filesystem::exists(png)) << png;
     const Image img = read_image(png);

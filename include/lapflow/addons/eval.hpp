@@ -60,7 +60,13 @@ struct FrameMetrics {
   // back-advected point there.
   std::size_t popping_texels = 0;
   double popping = kNoValue;
+  /// Share of the popped area whose new patch was born on this frame (its
+  /// id above every id on the previous frame's atlas): popping caused by births.
+  double popping_births = kNoValue;
   std::optional<std::size_t> born, died;  ///< from NAME.stats.jsonl (died = retired + lost)
+  /// The population, from NAME.stats.jsonl when the bake wrote it: patches
+  /// alive, a fresh seeding's count, and deaths by cause.
+  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden;
   // Drift at rest, at fixed surface points: this frame's covered chart
   // texels with |v| <= min_speed, each located on the previous frame's mesh
   // by closest point (then barycentrics, atlas uv, the texel there). Points
