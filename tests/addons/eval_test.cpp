@@ -55,6 +55,22 @@ void write_toy_exemplar(const TempDir& dir) {
   write_exr(dir / "ex.exr", ex, {"R", "G", "B"}, {ExrPixelType::Float, ExrCompression::Zip});
 }
 
+/// NAME.bake.json of a hand-written toy bake: frames 1..count of in.%04d.ply,
+/// exemplar ex.exr, AOVs on.
+void write_toy_manifest(const TempDir& dir, const std::string& name, std::size_t count, double radius,
+                        int resolution) {
+  BakeManifest m;
+  m.name = name;
+  m.mesh_pattern = dir / "in.%04d.ply";
+  for (std::size_t k = 0; k < count; ++k) m.frames.push_back(int(k) + 1);
+  m.fps = 24;
+  m.exemplar_color = dir / "ex.exr";
+  m.radius = radius;
+  m.resolution = resolution;
+  m.aov = true;
+  write_bake_manifest(m, bake_manifest_path(dir.str(), name));
+}
+
 void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
   write_toy_exemplar(dir);
 
@@ -105,16 +121,7 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
   }
   test::write_bytes(dir / "toy.stats.jsonl", stats);
 
-  BakeManifest m;
-  m.name = "toy";
-  m.mesh_pattern = dir / "in.%04d.ply";
-  for (std::size_t k = 0; k < frames.size(); ++k) m.frames.push_back(int(k) + 1);
-  m.fps = 24;
-  m.exemplar_color = dir / "ex.exr";
-  m.radius = kR;
-  m.resolution = 4;
-  m.aov = true;
-  write_bake_manifest(m, bake_manifest_path(dir.str(), "toy"));
+  write_toy_manifest(dir, "toy", frames.size(), kR, 4);
 }
 
 // ---- the grid toy: drift at fixed points ------------------------------------
@@ -168,16 +175,7 @@ void write_grid_toy_bake(const TempDir& dir, const std::vector<GridFrame>& frame
     stats += fmt::format(R"({{"frame":{},"patches":{{"born":0,"retired":0,"lost":0}}}})", f) + "\n";
   }
   test::write_bytes(dir / "grid.stats.jsonl", stats);
-  BakeManifest m;
-  m.name = "grid";
-  m.mesh_pattern = dir / "in.%04d.ply";
-  for (std::size_t k = 0; k < frames.size(); ++k) m.frames.push_back(int(k) + 1);
-  m.fps = 24;
-  m.exemplar_color = dir / "ex.exr";
-  m.radius = kGridR;
-  m.resolution = 8;
-  m.aov = true;
-  write_bake_manifest(m, bake_manifest_path(dir.str(), "grid"));
+  write_toy_manifest(dir, "grid", frames.size(), kGridR, 8);
 }
 
 // ---- small real bakes -----------------------------------------------------
