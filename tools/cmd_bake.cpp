@@ -169,6 +169,15 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0))
       ->group("Erosion");
+  cmd.add_flag("--hold", o.raster.hold,
+               "Hysteresis of the erosion test where a patch won texels before, so a texel does not change hands "
+               "when only the atlas's sampling moved (docs/temporal.md; experimental)")
+      ->group("Erosion");
+  cmd.add_option("--hold-margin", o.raster.hold_margin,
+                 "Where a patch won texels before, its erosion test passes with w lower by this much")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0))
+      ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "
                  "ghosts) or advect (no erosion, no retirement: a purely advected texture that stretches)")

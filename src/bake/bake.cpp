@@ -108,6 +108,7 @@ void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats&
   st.chart_texels = r.chart_texels;
   st.forced_texels = r.forced_texels;
   st.closed_texels = r.closed_texels;
+  st.held_texels = r.held_texels;
   st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
 }
 

@@ -74,6 +74,9 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   m.mode = raster_mode_name(o.raster.mode);
   m.radius = o.patch.radius;
   m.epsilon = o.raster.epsilon;
+  m.hold = o.raster.hold;
+  m.hold_margin = o.raster.hold_margin;
+  m.small_hole = o.raster.small_hole;
   m.delta_max = o.weights.delta_max;
   m.resolution = o.atlas.resolution;
   m.seed = o.seed;
@@ -98,6 +101,9 @@ void write_bake_manifest(const BakeManifest& m, const std::string& path) {
                             {"mode", m.mode},
                             {"radius", m.radius},
                             {"epsilon", m.epsilon},
+                            {"hold", m.hold},
+                            {"hold_margin", m.hold_margin},
+                            {"small_hole", m.small_hole},
                             {"delta_max", m.delta_max},
                             {"resolution", m.resolution},
                             {"seed", m.seed},
@@ -154,6 +160,9 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
     m.mode = j.value("mode", "erosion");
     m.radius = j.value("radius", 0.0);
     m.epsilon = j.value("epsilon", 0.0);
+    m.hold = j.value("hold", false);
+    m.hold_margin = j.value("hold_margin", 0.0);
+    m.small_hole = j.value("small_hole", 0.0);
     m.delta_max = j.value("delta_max", 0.0);
     m.resolution = j.value("resolution", 0);
     m.seed = j.value("seed", uint64_t(0));

@@ -30,6 +30,7 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"coverage", s.coverage},
           {"forced_texels", s.forced_texels},
           {"closed_texels", s.closed_texels},
+          {"held_texels", s.held_texels},
           {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"weights", s.seconds_weights},
                        {"seed", s.seconds_seed}, {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster},
                        {"draw", s.seconds_draw}, {"holes", s.seconds_holes}, {"resolve", s.seconds_resolve},

@@ -50,6 +50,35 @@ inline float vertex_weight(const Patch& patch, int v) {
   return patch.weight.size() == patch.positions.size() ? patch.weight[v] : 1.f;
 }
 
+// The erosion test, with the hold where the patch won texels before
+// (RasterOptions::hold).
+// A held texel may lie up to the reach outside the uv square, where the
+// plain test always erodes: a sample a fraction of a texel past the square's
+// edge is still the point that was held (the lookups clamp to the edge).
+// w is linear on the patch triangle: `slope` is its gradient's length in
+// uv, so w + slope x reach bounds w within the reach (weight_slope).
+inline bool passes(const RasterContext& ctx, const Patch& patch, double u, double v, double w, double slope) {
+  if (ctx.hold && !patch.held.empty()) {
+    const double r = ctx.held_reach;
+    if (u >= -r && u <= 1 + r && v >= -r && v <= 1 + r) {
+      const double uc = std::clamp(u, 0.0, 1.0), vc = std::clamp(v, 0.0, 1.0);
+      if (held_at(patch.held, uc, vc))
+        return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, uc, vc, std::min(1.0, w + slope * r));
+    }
+  }
+  return keeps(ctx.erosion, u, v, w, ctx.mode);
+}
+
+// The length of the gradient in uv of w interpolated over a patch triangle.
+inline double weight_slope(const Vec2 uv[3], const float w[3]) {
+  const Vec2 d1 = uv[1] - uv[0], d2 = uv[2] - uv[0];
+  const double det = cross(d1, d2);
+  if (!(std::abs(det) > 1e-14)) return 0;
+  const double dw1 = double(w[1]) - w[0], dw2 = double(w[2]) - w[0];
+  const double gx = (dw1 * d2.y - dw2 * d1.y) / det, gy = (dw2 * d1.x - dw1 * d2.x) / det;
+  return std::sqrt(gx * gx + gy * gy);
+}
+
 // Barycentric coordinates of pixel centre (x, y) in pixel-space triangle P.
 struct Bary {
   Vec2 p0, e1, e2;
@@ -78,10 +107,11 @@ constexpr double kInsideTol = 1e-9;
 // Draws one patch triangle (pixel positions P) into the texels accepted by
 // `accept(texel index)`, inside the clip box; erosion is the discard.
 template <class Sink, class Accept>
-void draw_triangle(RasterContext& ctx, Sink& sink, const Vec2 P[3], const Vec2 uv[3], const float w[3], uint64_t key,
-                   int cx0, int cy0, int cx1, int cy1, Accept&& accept) {
+void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec2 P[3], const Vec2 uv[3],
+                   const float w[3], uint64_t key, int cx0, int cy0, int cx1, int cy1, Accept&& accept) {
   Bary b;
   if (!b.init(P)) return;
+  const double slope = ctx.hold ? weight_slope(uv, w) : 0;
   const int x0 = std::max(cx0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
   const int x1 = std::min(cx1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
   const int y0 = std::max(cy0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
@@ -100,7 +130,7 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Vec2 P[3], const Vec2 u
       const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
-      if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
+      if (!passes(ctx, patch, u, v, wt, slope)) continue;
       sink.put(idx, key, u, v, wt);
     }
   }
@@ -179,7 +209,7 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
     const Tri& FT = ctx.mesh.triangles[F];
     const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
     const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
-    draw_triangle(ctx, sink, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
+    draw_triangle(ctx, sink, patch, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
       if (tm.triangle[idx] != F) return false;
       const double b1 = tm.b1[idx], b2 = tm.b2[idx];
       const Vec3 x = ctx.mesh.positions[FT[0]] * (1 - b1 - b2) + ctx.mesh.positions[FT[1]] * b1 +
@@ -294,6 +324,7 @@ struct ChartTriangle {
   Bary bary;
   Vec2 uv[3];
   float w[3];
+  float slope = 0;  // weight_slope (hold only)
   int x0, y0, x1, y1;  // pixel bbox, clamped to the atlas
   bool ring = false;   // test the pixels around it for a seam (see rasterize_patch)
 };
@@ -306,7 +337,7 @@ struct ChartTriangle {
 // Sets leaky[k] when triangle k covers a pixel centre outside its chart: its
 // vertices are in one chart but part of it lies across a seam or boundary.
 template <class Sink>
-void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, const ChartTriangle* tris,
+void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::size_t patch_index, const ChartTriangle* tris,
                       std::size_t count, std::vector<int32_t>& local, uint8_t* leaky) {
   int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
   for (std::size_t k = 0; k < count; ++k) {
@@ -327,7 +358,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, c
     for (std::size_t k = 0; k < count; ++k) {
       const ChartTriangle& t = tris[k];
       const Vec2 P[3] = {t.bary.p0, t.bary.p0 + t.bary.e1, t.bary.p0 + t.bary.e2};
-      draw_triangle(ctx, sink, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
+      draw_triangle(ctx, sink, patch, P, t.uv, t.w, make_key(patch_index, std::size_t(t.index)), t.x0, t.y0, t.x1, t.y1,
                     [&](int32_t idx) { return chart_of[tri_of[idx]] == chart; });
       leaky[k] = 1;  // not checked on this rare path: let the seam fallback look
     }
@@ -408,7 +439,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, std::size_t patch_index, c
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
-      if (!keeps(ctx.erosion, u, v, wt, ctx.mode)) continue;
+      if (!passes(ctx, patch, u, v, wt, t.slope)) continue;
       sink.put(idx, key, u, v, wt);
     }
   }
@@ -473,6 +504,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
       const Vec2 P[3] = {vpix[t[0]], vpix[t[1]], vpix[t[2]]};
       if (!ct.bary.init(P)) continue;
       for (int k = 0; k < 3; ++k) ct.uv[k] = patch.rest_uv[t[k]], ct.w[k] = vertex_weight(patch, t[k]);
+      if (ctx.hold) ct.slope = float(weight_slope(ct.uv, ct.w));
       ct.x0 = std::max(0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
       ct.x1 = std::min(Nm1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
       ct.y0 = std::max(0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
@@ -521,7 +553,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
   for (std::size_t b = 0; b < in_chart.size();) {
     std::size_t e = b;
     while (e < in_chart.size() && in_chart[e].chart == in_chart[b].chart) ++e;
-    draw_chart_group(ctx, sink, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
+    draw_chart_group(ctx, sink, patch, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
     b = e;
   }
   // The parts of leaky triangles beyond their chart, through the fallback.
@@ -607,6 +639,17 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const
   ctx.texel_world_size = st.texel_world_size;
   const Image& base = exemplar.mips.levels[0];
   const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
+  ctx.hold = options.hold && options.mode == RasterMode::Erosion;
+  if (ctx.hold) {
+    // One atlas texel in uv; the window reaches a pixel further so that the
+    // bilinear lookup of the maximum bounds every lookup within the reach.
+    ctx.held_reach = st.texel_world_size / (2 * options.radius);
+    const Image& F = exemplar.erosion.feature;
+    const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
+    const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
+    ctx.held_erosion = exemplar.erosion;
+    ctx.held_erosion.feature = max_filter(F, kx, ky);
+  }
   st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
   if (options.mode == RasterMode::Blend) {
     ctx.blend.mips = &exemplar.mips;
@@ -682,6 +725,34 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     int tri = -1, chart = -1;
     bool ok = false, same_chart = false;
     Bary bary;
+    Vec2 half;  // half the texel's footprint in the patch's uv (a box), for Patch::held
+  };
+  // Patch::held for the next frame: each texel a patch won by its erosion test
+  // marks the held cells under its footprint (the texel square mapped into
+  // uv, as a box), so the marked cells cover the won region without gaps
+  // whatever the atlas's sampling. Bits are or-ed: the result does not depend
+  // on the order.
+  const bool hold = ctx.hold;
+  if (hold) ctx.held_next.assign(patches.patches.size() * kHeldWords, 0);
+  else ctx.held_next.clear();
+  // The cells under the texel's footprint (the texel square mapped into uv,
+  // as its bounding box), so the marked cells cover the won region without
+  // gaps whatever the atlas's sampling.
+  auto mark_held = [&](std::size_t p, double u, double v, Vec2 half) {
+    constexpr int R = kHeldCells;
+    const int u0 = std::max(0, int(std::floor((u - half.x) * R))), u1 = std::min(R - 1, int(std::floor((u + half.x) * R)));
+    const int v0 = std::max(0, int(std::floor((v - half.y) * R))), v1 = std::min(R - 1, int(std::floor((v + half.y) * R)));
+    if (u0 > u1 || v0 > v1 || u1 - u0 > 16 || v1 - v0 > 16) return;  // off the square, or a degenerate map
+    uint64_t* words = &ctx.held_next[p * kHeldWords];
+    for (int cv = v0; cv <= v1; ++cv) {
+      const std::size_t b0 = std::size_t(cv) * R + std::size_t(u0), b1 = std::size_t(cv) * R + std::size_t(u1);
+      for (std::size_t w = b0 >> 6; w <= b1 >> 6; ++w) {
+        const std::size_t lo = std::max(b0, w << 6) & 63, hi = std::min(b1, (w << 6) + 63) & 63;
+        const uint64_t bits = (hi == 63 ? ~uint64_t(0) : ((uint64_t(1) << (hi + 1)) - 1)) & ~((uint64_t(1) << lo) - 1);
+        std::atomic_ref<uint64_t> slot(words[w]);
+        if ((slot.load(std::memory_order_relaxed) & bits) != bits) slot.fetch_or(bits, std::memory_order_relaxed);
+      }
+    }
   };
   constexpr int kWinnerCacheBits = 11;
   static std::atomic<uint64_t> generations{0};
@@ -720,6 +791,16 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
             slot.tri = tri;
             slot.chart = atlas.chart_of_triangle[tri];
             slot.ok = winner_pixels(ctx, patch, ti, tri, P, &slot.same_chart) && slot.bary.init(P);
+            if (slot.ok && hold) {
+              const Tri& t = patch.triangles[ti];
+              const Vec2 uv0 = patch.rest_uv[t[0]], uv1 = patch.rest_uv[t[1]], uv2 = patch.rest_uv[t[2]];
+              // uv changes by one pixel step in x and in y (the map is affine).
+              const double i1 = slot.bary.inv_area;
+              const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
+              const Vec2 ux = (d1 * slot.bary.e2.y - d2 * slot.bary.e1.y) * i1;
+              const Vec2 uy = (d2 * slot.bary.e1.x - d1 * slot.bary.e2.x) * i1;
+              slot.half = {0.5 * (std::abs(ux.x) + std::abs(uy.x)), 0.5 * (std::abs(ux.y) + std::abs(uy.y))};
+            }
           }
           cur = &slot;
         }
@@ -732,6 +813,10 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
           if (!blended) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
+          // Every texel won by the test (held or not) marks its footprint.
+          // The held region can only creep where the held test passes: at
+          // most about a texel beyond where the plain test does.
+          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i])) mark_held(p, u, v, cur->half);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }
         if (p != run_patch) {
@@ -803,7 +888,19 @@ void retire_patches(RasterBuffers& r, PatchSet& patches) {
       ++(eroded_away(ctx, patches.patches[p]) ? st.retired_eroded : st.retired_hidden);
       continue;
     }
-    kept.push_back(std::move(patches.patches[p]));
+    Patch& patch = patches.patches[p];
+    if (ctx.held_next.empty()) {
+      patch.held.clear();
+    } else {
+      // Held cells stay held (the union over the patch's life): where the
+      // patch no longer passes even with the slack, the cell has no effect.
+      const uint64_t* words = &ctx.held_next[p * kHeldWords];
+      if (std::any_of(words, words + kHeldWords, [](uint64_t w) { return w != 0; })) {
+        if (patch.held.empty()) patch.held.assign(kHeldWords, 0);
+        for (std::size_t k = 0; k < kHeldWords; ++k) patch.held[k] |= words[k];
+      }
+    }
+    kept.push_back(std::move(patch));
     st.texels_per_patch.push_back(n);
   }
   patches.patches = std::move(kept);

@@ -76,6 +76,48 @@ RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon)
   return r;
 }
 
+namespace detail {
+
+// One row or column of a running maximum over a window of 2 k + 1 samples
+// (clamped at the ends), in O(1) per sample: the van Herk / Gil-Werman
+// prefix and suffix maxima over blocks of 2 k + 1.
+static void running_max(const float* in, std::size_t stride, int n, int k, float* out, std::vector<float>& pre,
+                        std::vector<float>& suf) {
+  const int w = 2 * k + 1;
+  pre.resize(std::size_t(n)), suf.resize(std::size_t(n));
+  for (int i = 0; i < n; ++i) pre[i] = (i % w == 0) ? in[i * stride] : std::max(pre[i - 1], in[i * stride]);
+  for (int i = n - 1; i >= 0; --i)
+    suf[i] = (i == n - 1 || (i + 1) % w == 0) ? in[i * stride] : std::max(suf[i + 1], in[i * stride]);
+  for (int i = 0; i < n; ++i) {
+    if (i - k >= 0 && i + k <= n - 1) {
+      out[i * stride] = std::max(suf[i - k], pre[i + k]);  // a full window spans one block or two
+      continue;
+    }
+    const int a = std::max(0, i - k), b = std::min(n - 1, i + k);  // clamped at an end: directly
+    float m = in[a * stride];
+    for (int j = a + 1; j <= b; ++j) m = std::max(m, in[j * stride]);
+    out[i * stride] = m;
+  }
+}
+
+Image max_filter(const Image& img, int kx, int ky) {
+  Image tmp = img, out = img;
+  std::vector<float> pre, suf;
+  if (kx > 0)
+    for (int y = 0; y < img.height; ++y)
+      running_max(&img.pixels[std::size_t(y) * img.width], 1, img.width, kx, &tmp.pixels[std::size_t(y) * img.width],
+                  pre, suf);
+  if (ky > 0)
+    for (int x = 0; x < img.width; ++x)
+      running_max(&tmp.pixels[std::size_t(x)], std::size_t(img.width), img.height, ky, &out.pixels[std::size_t(x)], pre,
+                  suf);
+  else
+    out = std::move(tmp);
+  return out;
+}
+
+}  // namespace detail
+
 bool erosion_keeps(const ErosionMap& map, double u, double v, double w, RasterMode mode) {
   return detail::keeps(map, u, v, w, mode);
 }

@@ -263,9 +263,79 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   return born;
 }
 
-std::size_t propagate_keys(RasterContext& ctx) {
+// Calls f(n) for each of chart texel i's 8 neighbours in the same chart.
+template <class F>
+static void for_each_chart_neighbour(const RasterContext& ctx, uint32_t i, F&& f) {
   const TexelMap& tm = ctx.atlas.texels;
   const int N = ctx.N;
+  const int chart = ctx.atlas.chart_of_triangle[tm.triangle[i]];
+  const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = x + dx, yy = y + dy;
+      if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
+      const int32_t n = ctx.index[std::size_t(yy) * N + xx];
+      if (n >= 0 && ctx.atlas.chart_of_triangle[tm.triangle[n]] == chart) f(n);
+    }
+}
+
+static void mark_extrapolated(RasterContext& ctx, uint32_t i) {
+  if (ctx.extrapolated.empty()) ctx.extrapolated.assign(ctx.keys.size(), 0);
+  ctx.extrapolated[i] = 1;
+}
+
+std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
+  if (!ctx.hold) return 0;
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  const double reach = ctx.held_reach;
+  std::size_t closed = 0;
+  // Two Jacobi sweeps: a held point at most two texel layers into a hole.
+  for (int sweep = 0; sweep < 2; ++sweep) {
+    const std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
+    if (open.empty()) break;
+    std::vector<uint64_t> next(open.size(), kNoKey);
+    parallel_for(open.size(), [&](std::size_t b, std::size_t e) {
+      std::vector<uint64_t> tried;
+      for (std::size_t j = b; j < e; ++j) {
+        const uint32_t i = open[j];
+        const int tri = tm.triangle[i];
+        const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+        tried.clear();
+        uint64_t best = kNoKey;
+        for_each_chart_neighbour(ctx, i, [&](int32_t n) {
+          const uint64_t key = ctx.keys[n];
+          if (key == kNoKey || key >= best || std::find(tried.begin(), tried.end(), key) != tried.end()) return;
+          tried.push_back(key);
+          const Patch& patch = patches.patches[std::size_t(key >> 32)];
+          if (patch.held.empty()) return;
+          const int ti = int(key & 0xffffffffu);
+          Vec2 P[3];
+          if (!winner_pixels(ctx, patch, ti, tri, P)) return;
+          const Vec2 e1 = P[1] - P[0], e2 = P[2] - P[0];
+          const double a = cross(e1, e2);
+          if (!(std::abs(a) > 1e-12)) return;
+          const Vec2 d{x - P[0].x, y - P[0].y};
+          const double l1 = cross(d, e2) / a, l2 = cross(e1, d) / a, l0 = 1 - l1 - l2;
+          const Tri& t = patch.triangles[ti];
+          const double u = l0 * patch.rest_uv[t[0]].x + l1 * patch.rest_uv[t[1]].x + l2 * patch.rest_uv[t[2]].x;
+          const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
+          if (!(u >= -reach && u <= 1 + reach && v >= -reach && v <= 1 + reach)) return;
+          if (held_at(patch.held, std::clamp(u, 0.0, 1.0), std::clamp(v, 0.0, 1.0))) best = key;
+        });
+        next[j] = best;
+      }
+    }, 256);
+    std::size_t changed = 0;
+    for (std::size_t j = 0; j < open.size(); ++j)
+      if (next[j] != kNoKey) ctx.keys[open[j]] = next[j], mark_extrapolated(ctx, open[j]), ++changed;
+    closed += changed;
+    if (changed == 0) break;
+  }
+  return closed;
+}
+
+std::size_t propagate_keys(RasterContext& ctx) {
   std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
   std::size_t filled = 0;
   std::vector<uint64_t> next(open.size());
@@ -274,18 +344,8 @@ std::size_t propagate_keys(RasterContext& ctx) {
     // Jacobi sweep: read the keys of the previous sweep only.
     parallel_for(open.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t j = b; j < e; ++j) {
-        const uint32_t i = open[j];
-        const int chart = ctx.atlas.chart_of_triangle[tm.triangle[i]];
-        const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
         uint64_t best = kNoKey;
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
-            const int32_t n = ctx.index[std::size_t(yy) * N + xx];
-            if (n < 0 || ctx.atlas.chart_of_triangle[tm.triangle[n]] != chart) continue;
-            best = std::min(best, ctx.keys[n]);
-          }
+        for_each_chart_neighbour(ctx, open[j], [&](int32_t n) { best = std::min(best, ctx.keys[n]); });
         next[j] = best;
       }
     }, 1024);
@@ -296,6 +356,7 @@ std::size_t propagate_keys(RasterContext& ctx) {
         still.push_back(open[j]);
       } else {
         ctx.keys[open[j]] = next[j];
+        mark_extrapolated(ctx, open[j]);
         ++changed;
       }
     }
@@ -354,7 +415,7 @@ std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches
   }, 1);
   std::size_t filled = 0;
   for (std::size_t j = 0; j < open.size(); ++j)
-    if (found[j] != kNoKey) ctx.keys[open[j]] = found[j], ++filled;
+    if (found[j] != kNoKey) ctx.keys[open[j]] = found[j], mark_extrapolated(ctx, open[j]), ++filled;
   return filled;
 }
 
@@ -371,6 +432,11 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   const bool blend = options.mode == RasterMode::Blend;
   if (blend) blend_mark_coverage(ctx);
   std::size_t closed = 0;
+  // A hole texel whose neighbour's patch held that very point before (its
+  // map extended to the texel lands in a held cell) goes back to that patch:
+  // the hold where the sample fell just past the patch's triangles or its
+  // test. It marks nothing new in Patch::held, so the region cannot creep.
+  if (options.fill_holes) st.held_texels = close_held_texels(ctx, patches);
   if (options.fill_holes && make_patch)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {

@@ -18,6 +18,9 @@ inline uint64_t make_key(std::size_t patch_index, std::size_t triangle) {
   return (uint64_t(patch_index) << 32) | uint64_t(uint32_t(triangle));
 }
 
+/// The feature map's maximum over a window of 2 kx + 1 by 2 ky + 1 pixels.
+Image max_filter(const Image& img, int kx, int ky);
+
 /// One texel a patch triangle covers (Blend mode): chart texel, patch
 /// triangle, and the patch's (u, v, w) there.
 struct BlendSample {
@@ -67,6 +70,18 @@ struct RasterContext {
   std::vector<int32_t> index;
   /// Per chart texel: the smallest key of a patch that keeps it (kNoKey: none).
   std::vector<uint64_t> keys;
+  /// Per chart texel, set by fill_holes: its key was taken from a neighbour
+  /// or the nearest patch (closed or forced), not won by the erosion test.
+  std::vector<uint8_t> extrapolated;
+  /// Per patch index, kHeldWords words: the cells of Patch::held for the
+  /// next frame, marked by resolve_texels and moved into the patches by
+  /// retire_patches (empty when RasterOptions::hold is off).
+  std::vector<uint64_t> held_next;
+  /// RasterOptions::hold is on (Erosion mode): the held test's feature map
+  /// (the maximum within `held_reach` in uv: one atlas texel) and reach.
+  bool hold = false;
+  ErosionMap held_erosion;
+  double held_reach = 0;
   /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).
   std::vector<Vec3> tri_normal, tri_centroid;
   std::vector<double> tri_radius;
@@ -125,6 +140,11 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
 /// Gives every open chart texel the key of a covered 8-neighbour in the same
 /// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
 std::size_t propagate_keys(RasterContext& ctx);
+
+/// Before hole filling (RasterOptions::hold): hole texels up to two layers
+/// deep take a neighbour's patch where that patch's map, extended to them,
+/// lands in a cell it holds. Returns the texels so closed.
+std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches);
 
 /// Last resort after propagate_keys, for chart texels with no covered texel
 /// in their chart (a tiny chart whose newborn failed): each takes the key of

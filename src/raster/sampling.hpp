@@ -40,6 +40,19 @@ inline bool keeps(const ErosionMap& map, double u, double v, double w, RasterMod
   return std::sqrt(double(f) + D) * map.inv_max - map.epsilon >= 1.0 - w;
 }
 
+/// The erosion test where the patch holds (u, v) (RasterOptions::hold):
+/// `held.feature` is the feature map's maximum over `reach` in uv, D(u, v)
+/// is raised by its largest change over that distance, and the bar is
+/// lowered by `margin`.
+inline bool keeps_held(const ErosionMap& held, double reach, double margin, double u, double v, double w) {
+  if (!(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;
+  float f;
+  bilinear<1>(held.feature, u, v, &f);
+  const double d = std::sqrt((u - 0.5) * (u - 0.5) + (v - 0.5) * (v - 0.5));
+  const double D = std::min(1.0, std::max(0.0, 1.0 - d / 0.5) + 2 * reach);
+  return std::sqrt(double(f) + D) * held.inv_max - held.epsilon >= 1.0 - w - margin;
+}
+
 inline void sample(const ExemplarMips& mips, double u, double v, double lod, float out[4], bool trilinear = true) {
   const int last = int(mips.levels.size()) - 1;
   if (lod <= 0 || last == 0) {

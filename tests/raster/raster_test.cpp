@@ -758,3 +758,28 @@ TEST(Raster, NarrowHolesAreClosedByTheirNeighboursWideOnesGetAPatch) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// The held test's feature map (RasterOptions::hold): the maximum over a
+// (2 kx + 1) x (2 ky + 1) window, clamped at the borders, against a direct
+// loop on a random image whose sizes are not multiples of the window.
+TEST(Raster, MaxFilterIsTheWindowMaximum) {
+  Image img(37, 23, 1);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = float(hash_to_unit(hash64(7, i)));
+  for (const auto& [kx, ky] : {std::pair{0, 0}, std::pair{1, 2}, std::pair{3, 1}, std::pair{5, 5}, std::pair{40, 30}}) {
+    const Image m = detail::max_filter(img, kx, ky);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        float want = -1;
+        for (int yy = std::max(0, y - ky); yy <= std::min(img.height - 1, y + ky); ++yy)
+          for (int xx = std::max(0, x - kx); xx <= std::min(img.width - 1, x + kx); ++xx)
+            want = std::max(want, img.at(xx, yy, 0));
+        ASSERT_EQ(m.at(x, y, 0), want) << "kx " << kx << " ky " << ky << " at " << x << "," << y;
+      }
+  }
+}
+
+}  // namespace
+}  // namespace lapflow

@@ -52,6 +52,7 @@ struct FrameStats {
   double coverage = 0;                    ///< chart texels a patch kept / chart texels
   std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
   std::size_t closed_texels = 0;          ///< chart texels of small holes closed by their neighbours
+  std::size_t held_texels = 0;            ///< hole texels given back to the patch that held the point
   /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
   /// the atlas's own build time, on the read-ahead thread (so it overlaps
   /// the previous frame, except on the first); raster: draw, holes, resolve,

@@ -24,6 +24,8 @@ struct BakeManifest {
   std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< absolute
   std::string mode = "erosion";      ///< erosion | blend | advect
   double radius = 0, epsilon = 0, delta_max = 0;
+  bool hold = false;
+  double hold_margin = 0, small_hole = 0;  ///< RasterOptions::hold, hold_margin and small_hole
   int resolution = 0;
   uint64_t seed = 0;
   bool aov = false, dump_patches = false;

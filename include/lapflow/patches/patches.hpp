@@ -1,6 +1,7 @@
 #pragma once
 /// \file patches.hpp Deformable texture patches (ALGORITHM.md steps 1-5): the
 /// Lagrangian half of the paper. Each stage is a free function over plain data.
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -30,10 +31,29 @@ struct Patch {
   std::vector<float> weight;           ///< w_V = Q_V * B_V
   std::vector<float> triangle_quality; ///< Q_T per triangle
   std::vector<float> triangle_delta;   ///< Sorkine distortion delta per triangle (inf if folded/degenerate)
+  /// Where in its uv square the patch won atlas texels on the last frame: a
+  /// kHeldCells x kHeldCells bit grid over [0,1]^2 (row v, column u; empty
+  /// when it won none or was just born). The erosion test gives these cells
+  /// a slack (RasterOptions::hold): hysteresis in patch space, so a texel
+  /// does not change hands when only the atlas's sampling moved.
+  std::vector<uint64_t> held;
 
   bool alive() const { return !triangles.empty(); }
   std::size_t vertex_count() const { return positions.size(); }
 };
+
+/// Resolution of Patch::held: cells of 1/128 of the uv square, r/64 on the
+/// surface, whatever the atlas resolution.
+inline constexpr int kHeldCells = 128;
+inline constexpr std::size_t kHeldWords = std::size_t(kHeldCells) * kHeldCells / 64;
+
+/// True when (u, v) lies in a cell of `held` (kHeldWords words, or empty).
+inline bool held_at(const std::vector<uint64_t>& held, double u, double v) {
+  if (held.empty() || !(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;
+  const int cu = std::min(int(u * kHeldCells), kHeldCells - 1), cv = std::min(int(v * kHeldCells), kHeldCells - 1);
+  const std::size_t bit = std::size_t(cv) * kHeldCells + std::size_t(cu);
+  return (held[bit >> 6] >> (bit & 63)) & 1u;
+}
 
 /// Patches in stack order: oldest first (birth_frame, then id). The rasterizer
 /// walks them in this order; hole filling appends at the bottom.

@@ -47,6 +47,15 @@ struct RasterOptions {
   /// instead of a new patch (0 = every hole gets a patch, as in the paper).
   /// docs/temporal.md says why.
   double small_hole = 0.0;
+  /// Hysteresis of the erosion test in patch space (docs/temporal.md): where
+  /// a patch has won texels (Patch::held), the test reads the feature map's
+  /// maximum and w's within one atlas texel and lowers the bar by
+  /// hold_margin (in the units of w), so a texel does not change hands when
+  /// only the atlas's sampling of the surface moved. Off by default: it lets
+  /// a kept region grow by about a texel over the first frames, so an
+  /// unchanged mesh no longer gives bit-identical frames.
+  bool hold = false;
+  double hold_margin = 0.05;
 };
 
 /// Box-filtered mip pyramid of the exemplar's colour and displacement,
@@ -93,6 +102,7 @@ struct RasterStats {
   std::size_t chart_texels = 0;
   std::size_t covered_texels = 0;  ///< chart texels with a patch (kept, or forced); Blend: summed w above 1e-3, or forced
   std::size_t forced_texels = 0;   ///< chart texels given the patch of a neighbour because hole filling could not cover them
+  std::size_t held_texels = 0;     ///< hole texels given back to the patch that held the point (RasterOptions::hold)
   std::size_t closed_texels = 0;   ///< chart texels of small holes closed by their neighbours (RasterOptions::small_hole)
   std::size_t patches_born = 0;    ///< by hole filling
   std::size_t patches_retired = 0;
