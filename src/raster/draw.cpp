@@ -52,19 +52,12 @@ inline float vertex_weight(const Patch& patch, int v) {
 
 // The erosion test, with the hold where the patch won texels before
 // (RasterOptions::hold).
-// A held texel may lie up to the reach outside the uv square, where the
-// plain test always erodes: a sample a fraction of a texel past the square's
-// edge is still the point that was held (the lookups clamp to the edge).
 // w is linear on the patch triangle: `slope` is its gradient's length in
 // uv, so w + slope x reach bounds w within the reach (weight_slope).
 inline bool passes(const RasterContext& ctx, const Patch& patch, double u, double v, double w, double slope) {
-  if (ctx.hold && !patch.held.empty()) {
+  if (ctx.hold && held_at(patch.held, u, v)) {
     const double r = ctx.held_reach;
-    if (u >= -r && u <= 1 + r && v >= -r && v <= 1 + r) {
-      const double uc = std::clamp(u, 0.0, 1.0), vc = std::clamp(v, 0.0, 1.0);
-      if (held_at(patch.held, uc, vc))
-        return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, uc, vc, std::min(1.0, w + slope * r));
-    }
+    return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
   return keeps(ctx.erosion, u, v, w, ctx.mode);
 }
@@ -725,34 +718,56 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     int tri = -1, chart = -1;
     bool ok = false, same_chart = false;
     Bary bary;
-    Vec2 half;  // half the texel's footprint in the patch's uv (a box), for Patch::held
+    Vec2 ux, uy;  // the patch's uv per pixel step in x and y (Patch::held)
   };
-  // Patch::held for the next frame: each texel a patch won by its erosion test
-  // marks the held cells under its footprint (the texel square mapped into
-  // uv, as a box), so the marked cells cover the won region without gaps
-  // whatever the atlas's sampling. Bits are or-ed: the result does not depend
-  // on the order.
+  // Patch::held for the next frame (below, per won texel). Bits are or-ed:
+  // the result does not depend on the order.
   const bool hold = ctx.hold;
   if (hold) ctx.held_next.assign(patches.patches.size() * kHeldWords, 0);
   else ctx.held_next.clear();
-  // The cells under the texel's footprint (the texel square mapped into uv,
-  // as its bounding box), so the marked cells cover the won region without
-  // gaps whatever the atlas's sampling.
-  auto mark_held = [&](std::size_t p, double u, double v, Vec2 half) {
+  // A texel won by the test marks the cells that lie wholly inside its
+  // footprint (the texel square mapped into uv by the winner's affine map:
+  // pixel steps ux, uy), and the cell under its centre. No other texel's
+  // centre lies in its footprint, so on an unchanged sampling no texel that
+  // lost finds its cell held (for cells smaller than a texel), and the frame
+  // repeats; under a new sampling the footprints tile the won region but for
+  // a band one cell wide along their borders, which the union over frames
+  // fills.
+  auto mark_held = [&](std::size_t p, double u, double v, Vec2 ux, Vec2 uy) {
     constexpr int R = kHeldCells;
-    const int u0 = std::max(0, int(std::floor((u - half.x) * R))), u1 = std::min(R - 1, int(std::floor((u + half.x) * R)));
-    const int v0 = std::max(0, int(std::floor((v - half.y) * R))), v1 = std::min(R - 1, int(std::floor((v + half.y) * R)));
-    if (u0 > u1 || v0 > v1 || u1 - u0 > 16 || v1 - v0 > 16) return;  // off the square, or a degenerate map
     uint64_t* words = &ctx.held_next[p * kHeldWords];
-    for (int cv = v0; cv <= v1; ++cv) {
-      const std::size_t b0 = std::size_t(cv) * R + std::size_t(u0), b1 = std::size_t(cv) * R + std::size_t(u1);
-      for (std::size_t w = b0 >> 6; w <= b1 >> 6; ++w) {
-        const std::size_t lo = std::max(b0, w << 6) & 63, hi = std::min(b1, (w << 6) + 63) & 63;
-        const uint64_t bits = (hi == 63 ? ~uint64_t(0) : ((uint64_t(1) << (hi + 1)) - 1)) & ~((uint64_t(1) << lo) - 1);
-        std::atomic_ref<uint64_t> slot(words[w]);
-        if ((slot.load(std::memory_order_relaxed) & bits) != bits) slot.fetch_or(bits, std::memory_order_relaxed);
+    auto set = [&](int cu, int cv) {
+      const std::size_t bit = std::size_t(cv) * R + std::size_t(cu);
+      std::atomic_ref<uint64_t> slot(words[bit >> 6]);
+      const uint64_t mask = uint64_t(1) << (bit & 63);
+      if (!(slot.load(std::memory_order_relaxed) & mask)) slot.fetch_or(mask, std::memory_order_relaxed);
+    };
+    set(std::clamp(int(u * R), 0, R - 1), std::clamp(int(v * R), 0, R - 1));
+    const double det = ux.x * uy.y - uy.x * ux.y;
+    if (!(std::abs(det) > 1e-18)) return;
+    const double hx = 0.5 * (std::abs(ux.x) + std::abs(uy.x)), hy = 0.5 * (std::abs(ux.y) + std::abs(uy.y));
+    const int u0 = std::max(0, int(std::floor((u - hx) * R))), u1 = std::min(R - 1, int(std::floor((u + hx) * R)));
+    const int v0 = std::max(0, int(std::floor((v - hy) * R))), v1 = std::min(R - 1, int(std::floor((v + hy) * R)));
+    if (u0 > u1 || v0 > v1 || u1 - u0 > 16 || v1 - v0 > 16) return;  // off the square, or a degenerate map
+    auto inside = [&](double cu, double cv) {  // uv point (cu, cv) in the footprint
+      const double dx = cu - u, dy = cv - v;
+      return std::abs(dx * uy.y - uy.x * dy) <= 0.5 * std::abs(det) && std::abs(ux.x * dy - dx * ux.y) <= 0.5 * std::abs(det);
+    };
+    for (int cv = v0; cv <= v1; ++cv)
+      for (int cu = u0; cu <= u1; ++cu)
+        if (inside(double(cu) / R, double(cv) / R) && inside(double(cu + 1) / R, double(cv) / R) &&
+            inside(double(cu) / R, double(cv + 1) / R) && inside(double(cu + 1) / R, double(cv + 1) / R))
+          set(cu, cv);
+  };
+  auto interior_texel = [&](std::size_t i, int x, int y) {
+    const int chart = atlas.chart_of_triangle[tm.triangle[i]];
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = x + dx, yy = y + dy;
+        const int32_t n = xx < 0 || yy < 0 || xx >= N || yy >= N ? -1 : ctx.index[std::size_t(yy) * N + xx];
+        if (n < 0 || atlas.chart_of_triangle[tm.triangle[n]] != chart) return false;
       }
-    }
+    return true;
   };
   constexpr int kWinnerCacheBits = 11;
   static std::atomic<uint64_t> generations{0};
@@ -792,14 +807,12 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
             slot.chart = atlas.chart_of_triangle[tri];
             slot.ok = winner_pixels(ctx, patch, ti, tri, P, &slot.same_chart) && slot.bary.init(P);
             if (slot.ok && hold) {
+              // The map is affine: uv changes by ux per pixel in x, uy in y.
               const Tri& t = patch.triangles[ti];
-              const Vec2 uv0 = patch.rest_uv[t[0]], uv1 = patch.rest_uv[t[1]], uv2 = patch.rest_uv[t[2]];
-              // uv changes by one pixel step in x and in y (the map is affine).
-              const double i1 = slot.bary.inv_area;
-              const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
-              const Vec2 ux = (d1 * slot.bary.e2.y - d2 * slot.bary.e1.y) * i1;
-              const Vec2 uy = (d2 * slot.bary.e1.x - d1 * slot.bary.e2.x) * i1;
-              slot.half = {0.5 * (std::abs(ux.x) + std::abs(uy.x)), 0.5 * (std::abs(ux.y) + std::abs(uy.y))};
+              const Vec2 d1 = patch.rest_uv[t[1]] - patch.rest_uv[t[0]], d2 = patch.rest_uv[t[2]] - patch.rest_uv[t[0]];
+              const double ia = slot.bary.inv_area;
+              slot.ux = (d1 * slot.bary.e2.y - d2 * slot.bary.e1.y) * ia;
+              slot.uy = (d2 * slot.bary.e1.x - d1 * slot.bary.e2.x) * ia;
             }
           }
           cur = &slot;
@@ -813,10 +826,12 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
           if (!blended) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
-          // Every texel won by the test (held or not) marks its footprint.
-          // The held region can only creep where the held test passes: at
-          // most about a texel beyond where the plain test does.
-          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i])) mark_held(p, u, v, cur->half);
+          // Only a texel whose 3x3 neighbourhood lies in its chart marks
+          // (mark_held): near a seam the texels of two charts sample the same
+          // surface at arbitrary offsets, and a cell marked from one chart
+          // would let the patch take a texel of the other that it just lost.
+          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i]) && interior_texel(i, x, y))
+            mark_held(p, u, v, cur->ux, cur->uy);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }
         if (p != run_patch) {

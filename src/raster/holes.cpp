@@ -288,7 +288,6 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
   if (!ctx.hold) return 0;
   const TexelMap& tm = ctx.atlas.texels;
   const int N = ctx.N;
-  const double reach = ctx.held_reach;
   std::size_t closed = 0;
   // Two Jacobi sweeps: a held point at most two texel layers into a hole.
   for (int sweep = 0; sweep < 2; ++sweep) {
@@ -320,8 +319,7 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
           const Tri& t = patch.triangles[ti];
           const double u = l0 * patch.rest_uv[t[0]].x + l1 * patch.rest_uv[t[1]].x + l2 * patch.rest_uv[t[2]].x;
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
-          if (!(u >= -reach && u <= 1 + reach && v >= -reach && v <= 1 + reach)) return;
-          if (held_at(patch.held, std::clamp(u, 0.0, 1.0), std::clamp(v, 0.0, 1.0))) best = key;
+          if (held_at(patch.held, u, v)) best = key;
         });
         next[j] = best;
       }
@@ -435,7 +433,7 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   // A hole texel whose neighbour's patch held that very point before (its
   // map extended to the texel lands in a held cell) goes back to that patch:
   // the hold where the sample fell just past the patch's triangles or its
-  // test. It marks nothing new in Patch::held, so the region cannot creep.
+  // test. It marks nothing in Patch::held, so the held region cannot creep.
   if (options.fill_holes) st.held_texels = close_held_texels(ctx, patches);
   if (options.fill_holes && make_patch)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);

@@ -197,3 +197,31 @@ TEST(RasterPipeline, DamBreakFrameFullCoverage) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// With the erosion hold (RasterOptions::hold) an unchanged mesh still gives
+// bit-identical frames: a texel marks only cells wholly inside its own
+// footprint, so no texel that lost on frame 0 finds its cell held on frame 1.
+// Frame 1 is also the first frame that reads Patch::held.
+TEST(RasterPipeline, HoldKeepsAStillSurfaceIdentical) {
+  SphereScene sc(256);
+  sc.ropt.hold = true;
+  SurfaceQuery q(sc.mesh);
+  PatchSet patches = sc.seeded(q);
+  FrameTextures f0 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+  std::size_t held_patches = 0;
+  for (const Patch& p : patches.patches) held_patches += !p.held.empty();
+  EXPECT_GT(held_patches, patches.patches.size() / 2);
+  FrameTextures f1 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+  FrameTextures f2 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 2, patches);
+  EXPECT_EQ(f1.stats.patches_born + f2.stats.patches_born, 0u);
+  EXPECT_EQ(f1.stats.patches_retired + f2.stats.patches_retired, 0u);
+  EXPECT_TRUE(f0.color.pixels == f1.color.pixels);
+  EXPECT_TRUE(f0.aov.pixels == f1.aov.pixels);
+  EXPECT_TRUE(f1.aov.pixels == f2.aov.pixels);
+}
+
+}  // namespace
+}  // namespace lapflow

@@ -51,9 +51,9 @@ struct RasterOptions {
   /// a patch has won texels (Patch::held), the test reads the feature map's
   /// maximum and w's within one atlas texel and lowers the bar by
   /// hold_margin (in the units of w), so a texel does not change hands when
-  /// only the atlas's sampling of the surface moved. Off by default: it lets
-  /// a kept region grow by about a texel over the first frames, so an
-  /// unchanged mesh no longer gives bit-identical frames.
+  /// only the atlas's sampling of the surface moved. An unchanged mesh still
+  /// gives bit-identical frames. Off by default until its default is decided
+  /// on every shared scene; false = the paper's memoryless test.
   bool hold = false;
   double hold_margin = 0.05;
 };
