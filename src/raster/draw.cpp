@@ -745,6 +745,9 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     set(std::clamp(int(u * R), 0, R - 1), std::clamp(int(v * R), 0, R - 1));
     const double det = ux.x * uy.y - uy.x * ux.y;
     if (!(std::abs(det) > 1e-18)) return;
+    // A cell fits in the footprint only if both its widths (area over the
+    // other side's length) reach a cell: at fine atlas resolutions, never.
+    if (std::abs(det) < std::max(norm(ux), norm(uy)) / R) return;
     const double hx = 0.5 * (std::abs(ux.x) + std::abs(uy.x)), hy = 0.5 * (std::abs(ux.y) + std::abs(uy.y));
     const int u0 = std::max(0, int(std::floor((u - hx) * R))), u1 = std::min(R - 1, int(std::floor((u + hx) * R)));
     const int v0 = std::max(0, int(std::floor((v - hy) * R))), v1 = std::min(R - 1, int(std::floor((v + hy) * R)));
