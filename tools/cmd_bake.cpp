@@ -178,6 +178,12 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0))
       ->group("Erosion");
+  cmd.add_option("--merge", o.raster.merge,
+                 "Retire a patch that won fewer texels than this fraction of pi r^2 when other patches keep every "
+                 "one of them (0 = only patches that won nothing retire, as in the paper)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0))
+      ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "
                  "ghosts) or advect (no erosion, no retirement: a purely advected texture that stretches)")

@@ -831,7 +831,7 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
 /// The population of one frame as NAME.stats.jsonl gives it.
 struct Population {
   std::size_t born = 0, died = 0;
-  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden;
+  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden, died_merged;
 };
 
 /// The population per frame from NAME.stats.jsonl (absent file: none; fields
@@ -862,6 +862,7 @@ std::map<int, Population> read_population(const BakeManifest& m) {
         optional(d, "lost_to_projection", pop.died_projection);
         optional(d, "eroded_away", pop.died_eroded);
         optional(d, "hidden", pop.died_hidden);
+        optional(d, "merged", pop.died_merged);
       }
     } catch (const nlohmann::json::exception& e) {
       throw InputError(path, fmt::format("line {}: {}", number, e.what()));
@@ -968,6 +969,7 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
       fm.born = pop.born, fm.died = pop.died;
       fm.alive = pop.alive, fm.fresh_seeding = pop.fresh_seeding;
       fm.died_projection = pop.died_projection, fm.died_eroded = pop.died_eroded, fm.died_hidden = pop.died_hidden;
+      fm.died_merged = pop.died_merged;
     }
     if (prev && std::isfinite(prev->texel_world) && !prev->uv.mesh.empty()) {
       prev->query = std::make_unique<SurfaceQuery>(prev->uv.mesh);
@@ -1019,7 +1021,8 @@ std::string eval_report_json(const EvalReport& r) {
         {"fresh_seeding", m.fresh_seeding ? nlohmann::json(*m.fresh_seeding) : nlohmann::json(nullptr)},
         {"deaths", {{"lost_to_projection", m.died_projection ? nlohmann::json(*m.died_projection) : nlohmann::json(nullptr)},
                     {"eroded_away", m.died_eroded ? nlohmann::json(*m.died_eroded) : nlohmann::json(nullptr)},
-                    {"hidden", m.died_hidden ? nlohmann::json(*m.died_hidden) : nlohmann::json(nullptr)}}},
+                    {"hidden", m.died_hidden ? nlohmann::json(*m.died_hidden) : nlohmann::json(nullptr)},
+                    {"merged", m.died_merged ? nlohmann::json(*m.died_merged) : nlohmann::json(nullptr)}}},
         {"drift", number(m.drift)},
         {"drift_points", m.drift_points},
         {"drift_border_points", m.drift_border_points},
@@ -1122,17 +1125,17 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
   const fs::path data = folder / (tag + ".dat"), script = folder / (tag + ".gp");
   std::string text =
       "# frame coverage contrast histR histG histB hist sw flow50 flow90 popping born died drift d50 d90 dmax d99 "
-      "drift_texel alive fresh_seeding died_projection died_eroded died_hidden\n";
+      "drift_texel alive fresh_seeding died_projection died_eroded died_hidden died_merged\n";
   auto v = [](double x) { return std::isfinite(x) ? fmt::format("{:.9g}", x) : std::string("NaN"); };
   auto n = [&](const std::optional<std::size_t>& x) { return v(x ? double(*x) : kNoValue); };
   for (const FrameMetrics& m : r.frames)
-    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
+    text += fmt::format("{} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", m.frame, v(m.coverage), v(m.contrast),
                         v(m.histogram_w1[0]), v(m.histogram_w1[1]), v(m.histogram_w1[2]), v(m.histogram_distance),
                         v(m.sliced_wasserstein), v(m.flow_median), v(m.flow_p90), v(m.popping),
                         v(m.born ? double(*m.born) : kNoValue), v(m.died ? double(*m.died) : kNoValue), v(m.drift),
                         v(m.distortion_median), v(m.distortion_p90), v(m.distortion_max), v(m.distortion_p99),
                         v(m.drift_texel), n(m.alive), n(m.fresh_seeding), n(m.died_projection), n(m.died_eroded),
-                        n(m.died_hidden));
+                        n(m.died_hidden), n(m.died_merged));
   write_text_atomically(data.string(), text);
 
   struct Plot {
@@ -1170,7 +1173,8 @@ std::vector<std::string> write_eval_plots(const EvalReport& r, const std::string
                    "'fresh seeding', {0} using 1:($21*1.5) with lines dashtype 3 title '1.5 x fresh seeding', {0} "
                    "using 1:12 axes x1y2 with linespoints title 'born', {0} using 1:22 axes x1y2 with linespoints "
                    "title 'died: projection', {0} using 1:23 axes x1y2 with linespoints title 'died: eroded', {0} "
-                   "using 1:24 axes x1y2 with linespoints title 'died: hidden'",
+                   "using 1:24 axes x1y2 with linespoints title 'died: hidden', {0} using 1:25 axes x1y2 with "
+                   "linespoints title 'died: merged'",
                    d),
        [](const FrameMetrics& m) { return m.alive ? double(*m.alive) : kNoValue; }},
       {"distortion.png", "Distortion delta = max(s1, 1/s2)", "delta",

@@ -104,6 +104,7 @@ void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats&
   st.patches_retired = r.patches_retired;
   st.retired_eroded = r.retired_eroded;
   st.retired_hidden = r.retired_hidden;
+  st.retired_merged = r.retired_merged;
   st.patches_alive = patches.patches.size();
   st.chart_texels = r.chart_texels;
   st.forced_texels = r.forced_texels;

@@ -77,6 +77,7 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   m.hold = o.raster.hold;
   m.hold_margin = o.raster.hold_margin;
   m.small_hole = o.raster.small_hole;
+  m.merge = o.raster.merge;
   m.delta_max = o.weights.delta_max;
   m.resolution = o.atlas.resolution;
   m.seed = o.seed;
@@ -104,6 +105,7 @@ void write_bake_manifest(const BakeManifest& m, const std::string& path) {
                             {"hold", m.hold},
                             {"hold_margin", m.hold_margin},
                             {"small_hole", m.small_hole},
+                            {"merge", m.merge},
                             {"delta_max", m.delta_max},
                             {"resolution", m.resolution},
                             {"seed", m.seed},
@@ -163,6 +165,7 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
     m.hold = j.value("hold", false);
     m.hold_margin = j.value("hold_margin", 0.0);
     m.small_hole = j.value("small_hole", 0.0);
+    m.merge = j.value("merge", 0.0);
     m.delta_max = j.value("delta_max", 0.0);
     m.resolution = j.value("resolution", 0);
     m.seed = j.value("seed", uint64_t(0));

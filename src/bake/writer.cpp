@@ -22,7 +22,7 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"patches", {{"alive", s.patches_alive}, {"born", s.patches_born}, {"retired", s.patches_retired},
                        {"lost", s.patches_lost}, {"fresh_seeding", s.fresh_seeding}}},
           {"deaths", {{"lost_to_projection", s.patches_lost}, {"eroded_away", s.retired_eroded},
-                      {"hidden", s.retired_hidden}}},
+                      {"hidden", s.retired_hidden}, {"merged", s.retired_merged}}},
           {"patch_vertices_removed", s.patch_vertices_removed},
           {"charts", s.charts},
           {"utilization", s.utilization},

@@ -6,6 +6,7 @@
 // each texel's winner (resolve_texels); retirement and gutter dilation are
 // here too; hole filling (fill_holes) is in holes.cpp.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <climits>
 #include <cmath>
@@ -886,19 +887,97 @@ bool eroded_away(const RasterContext& ctx, const Patch& patch) {
 
 }  // namespace
 
+namespace {
+
+// RasterOptions::merge: the patches (not born this frame) that won between 1
+// and `limit` texels, every one of which another patch's erosion test also
+// passes. Those others are drawn again into a second key buffer that only
+// the candidates' texels accept (the rest start at key 0, "taken"); only
+// patches near a candidate texel in 3D are drawn. Deterministic: atomic
+// minimum as in draw_patches.
+std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& patches,
+                                           const std::vector<uint64_t>& won, double limit) {
+  const std::size_t np = patches.patches.size();
+  std::vector<uint8_t> candidate(np, 0), merged(np, 0);
+  bool any = false;
+  for (std::size_t p = 0; p < std::min(np, ctx.newborn_from); ++p)
+    any |= (candidate[p] = won[p] > 0 && double(won[p]) < limit);
+  if (!any) return merged;
+  const TexelMap& tm = ctx.atlas.texels;
+  std::vector<uint64_t> alt(tm.size(), 0);
+  const double cell = ctx.radius;
+  auto cell_of = [&](const Vec3& x) {
+    return std::array<int64_t, 3>{int64_t(std::floor(x.x / cell)), int64_t(std::floor(x.y / cell)),
+                                  int64_t(std::floor(x.z / cell))};
+  };
+  std::vector<uint64_t> cells;
+  for (std::size_t i = 0; i < tm.size(); ++i) {
+    const uint64_t key = ctx.keys[i];
+    if (key == kNoKey || !candidate[key >> 32]) continue;
+    alt[i] = kNoKey;
+    const Tri& T = ctx.mesh.triangles[tm.triangle[i]];
+    const double b1 = tm.b1[i], b2 = tm.b2[i];
+    const auto c = cell_of(ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 +
+                           ctx.mesh.positions[T[2]] * b2);
+    cells.push_back(hash64(uint64_t(c[0]), uint64_t(c[1]), uint64_t(c[2])));
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  auto near = [&](const Patch& patch) {
+    // Patch vertices lie within about r of its centre: look a cell around.
+    // A patch stretched farther is not drawn, which can only keep a
+    // candidate (never retire one wrongly).
+    const auto c = cell_of(patch.center);
+    for (int64_t dz = -1; dz <= 1; ++dz)
+      for (int64_t dy = -1; dy <= 1; ++dy)
+        for (int64_t dx = -1; dx <= 1; ++dx)
+          if (std::binary_search(cells.begin(), cells.end(),
+                                 hash64(uint64_t(c[0] + dx), uint64_t(c[1] + dy), uint64_t(c[2] + dz))))
+            return true;
+    return false;
+  };
+  parallel_for(np, [&](std::size_t b, std::size_t e) {
+    KeySink sink{alt};
+    RasterCounters unused;
+    for (std::size_t q = b; q < e; ++q)
+      // Not a candidate, and not retiring for winning nothing.
+      if (!candidate[q] && won[q] > 0 && near(patches.patches[q]))
+        rasterize_patch_into(ctx, sink, patches.patches[q], q, unused);
+  }, 4);
+  std::vector<uint64_t> open(np, 0);
+  for (std::size_t i = 0; i < tm.size(); ++i)
+    if (alt[i] == kNoKey) ++open[ctx.keys[i] >> 32];
+  for (std::size_t p = 0; p < np; ++p) merged[p] = candidate[p] && open[p] == 0;
+  return merged;
+}
+
+}  // namespace
+
 void retire_patches(RasterBuffers& r, PatchSet& patches) {
-  const RasterContext& ctx = *r.context;
+  RasterContext& ctx = *r.context;
   RasterStats& st = r.stats;
   if (r.texels_won.size() != patches.patches.size())
     throw std::invalid_argument("retire_patches: resolve_texels first, on the same patches");
   const bool blend = ctx.options.mode == RasterMode::Blend;
   // After hole filling, so a newborn patch that covered nothing goes too.
   const bool retire = ctx.options.retire && ctx.options.mode != RasterMode::NoErosion;
+  const double merge_limit = retire && ctx.mode == RasterMode::Erosion && ctx.options.merge > 0 &&
+                                    ctx.texel_world_size > 0
+                                ? ctx.options.merge * 3.14159265358979323846 * (ctx.radius / ctx.texel_world_size) *
+                                      (ctx.radius / ctx.texel_world_size)
+                                : 0;
+  const std::vector<uint8_t> merged =
+      merge_limit > 0 ? covered_small_patches(ctx, patches, r.texels_won, merge_limit) : std::vector<uint8_t>{};
   std::vector<Patch> kept;
   kept.reserve(patches.patches.size());
   st.texels_per_patch.clear();
   for (std::size_t p = 0; p < patches.patches.size(); ++p) {
     const uint64_t n = r.texels_won[p];
+    if (!merged.empty() && merged[p]) {
+      ++st.patches_retired;
+      ++st.retired_merged;
+      continue;
+    }
     // Blend: a patch that gave weight to no texel retires, unless a forced
     // texel names it.
     if (retire && n == 0 && (!blend || ctx.blend.contributed[p] == 0)) {

@@ -435,6 +435,7 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   // the hold where the sample fell just past the patch's triangles or its
   // test. It marks nothing in Patch::held, so the held region cannot creep.
   if (options.fill_holes) st.held_texels = close_held_texels(ctx, patches);
+  ctx.newborn_from = patches.patches.size();
   if (options.fill_holes && make_patch)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {

@@ -80,6 +80,8 @@ struct RasterContext {
   /// RasterOptions::hold is on (Erosion mode): the held test's feature map
   /// (the maximum within `held_reach` in uv: one atlas texel) and reach.
   bool hold = false;
+  /// Patches from this index on were born in this frame's hole filling.
+  std::size_t newborn_from = std::numeric_limits<std::size_t>::max();
   ErosionMap held_erosion;
   double held_reach = 0;
   /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).

@@ -118,8 +118,8 @@ void write_toy_bake(const TempDir& dir, const std::vector<ToyFrame>& frames) {
     write_exr(dir / fmt::format("toy.aov.{:04d}.exr", f), aov, {"patch_id", "u", "v", "w"}, exact);
     stats += fmt::format(
                  R"({{"frame":{},"patches":{{"born":{},"retired":{},"lost":0,"alive":2,"fresh_seeding":3}},)"
-                 R"("deaths":{{"lost_to_projection":0,"eroded_away":0,"hidden":{}}}}})",
-                 f, f == 1 ? 2 : 1, f == 1 ? 0 : 1, f == 1 ? 0 : 1) +
+                 R"("deaths":{{"lost_to_projection":0,"eroded_away":0,"hidden":{},"merged":{}}}}})",
+                 f, f == 1 ? 2 : 1, f == 1 ? 0 : 2, f == 1 ? 0 : 1, f == 1 ? 0 : 1) +
              "\n";
   }
   test::write_bytes(dir / "toy.stats.jsonl", stats);
@@ -298,7 +298,7 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_TRUE(std::isnan(f2.drift));
   EXPECT_EQ(f2.flow_texels, 0u);  // nothing moves: no flow ratio
   EXPECT_EQ(*f2.born, 1u);
-  EXPECT_EQ(*f2.died, 1u);
+  EXPECT_EQ(*f2.died, 2u);
   // Patch 11 is newer than every patch of frame 1 (7 and 9): all of the
   // popping is caused by its birth. The population comes from the stats.
   EXPECT_EQ(f2.popping_births, 1.0);
@@ -306,10 +306,11 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_EQ(*f2.alive, 2u);
   EXPECT_EQ(*f2.fresh_seeding, 3u);
   EXPECT_EQ(*f2.died_hidden, 1u);
+  EXPECT_EQ(*f2.died_merged, 1u);
   EXPECT_EQ(*f2.died_eroded, 0u);
   EXPECT_EQ(*f1.died_hidden, 0u);
   EXPECT_EQ(r.born, 3u);
-  EXPECT_EQ(r.died, 1u);
+  EXPECT_EQ(r.died, 2u);
 }
 
 TEST(Eval, GridToyDriftAtFixedPointsLeavesBordersOut) {

@@ -76,7 +76,7 @@ TEST(Bake, EveryChartTexelIsCoveredOnEveryFrame) {
       }
     EXPECT_EQ(alpha, s.chart_texels);
     // Every retired patch has one cause, and the population has its yardstick.
-    EXPECT_EQ(s.retired_eroded + s.retired_hidden, s.patches_retired);
+    EXPECT_EQ(s.retired_eroded + s.retired_hidden + s.retired_merged, s.patches_retired);
     EXPECT_GT(s.fresh_seeding, 0u);
   }
   // The first frame is seeded: every sample of a fresh seeding became a patch
@@ -96,6 +96,38 @@ TEST(Bake, IdenticalForOneAndTwoThreads) {
   for (std::size_t i = 0; i < s1.size(); ++i) {
     EXPECT_EQ(s1[i].patches_alive, s2[i].patches_alive);
     EXPECT_EQ(s1[i].patches_born, s2[i].patches_born);
+    for (const char* kind : {"color", "disp", "aov"}) {
+      const Image a = frame_image(out1, kind, s1[i].frame), b = frame_image(out2, kind, s1[i].frame);
+      EXPECT_TRUE(a.pixels == b.pixels) << kind << " differs at frame " << s1[i].frame;
+    }
+  }
+}
+
+// The temporal options of docs/temporal.md together (hold, small holes
+// closed by neighbours, merge): coverage stays exactly 1, every retired
+// patch has one cause, and 1 and 2 threads give the same images.
+TEST(Bake, TemporalOptionsKeepCoverageAndAreIdenticalForOneAndTwoThreads) {
+  const fs::path meshes = demo_sequence("temporal_in", 4);
+  const fs::path out1 = fresh_dir("temporal_1"), out2 = fresh_dir("temporal_2");
+  auto options = [&](const fs::path& out) {
+    BakeOptions o = small_bake(meshes, out);
+    o.raster.hold = true;
+    o.raster.small_hole = 0.25;
+    o.raster.merge = 0.1;
+    return o;
+  };
+  set_thread_count(1);
+  const auto s1 = run(options(out1));
+  set_thread_count(2);
+  const auto s2 = run(options(out2));
+  set_thread_count(0);
+  ASSERT_EQ(s1.size(), 4u);
+  ASSERT_EQ(s2.size(), 4u);
+  for (std::size_t i = 0; i < s1.size(); ++i) {
+    EXPECT_EQ(s1[i].coverage, 1.0) << "frame " << s1[i].frame;
+    EXPECT_EQ(s1[i].retired_eroded + s1[i].retired_hidden + s1[i].retired_merged, s1[i].patches_retired);
+    EXPECT_EQ(s1[i].patches_alive, s2[i].patches_alive);
+    EXPECT_EQ(s1[i].retired_merged, s2[i].retired_merged);
     for (const char* kind : {"color", "disp", "aov"}) {
       const Image a = frame_image(out1, kind, s1[i].frame), b = frame_image(out2, kind, s1[i].frame);
       EXPECT_TRUE(a.pixels == b.pixels) << kind << " differs at frame " << s1[i].frame;

@@ -783,3 +783,50 @@ TEST(Raster, MaxFilterIsTheWindowMaximum) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// RasterOptions::merge: a small patch (b) shows as a crescent beside an older
+// one (a); a younger one (c) also keeps every texel of that crescent and wins
+// plenty elsewhere. b is retired as merged, and on the next frame c takes the
+// crescent: no hole, full coverage. Without merge b stays.
+TEST(Raster, MergeRetiresASmallPatchWhoseTexelsAnotherKeeps) {
+  auto scene = [] {
+    Scene sc = ramp_plane(128, 32, 0.2);
+    PatchSpec a;
+    a.centre = {0.4, 0.5, 0}, a.r = 0.2, a.half = 0.2;
+    PatchSpec b;
+    b.centre = {0.62, 0.5, 0}, b.r = 0.05, b.half = 0.05;
+    PatchSpec c = a;
+    c.centre = {0.7, 0.5, 0};
+    sc.add(a);
+    sc.add(b);
+    sc.add(c);
+    return sc;
+  };
+  RasterOptions o;
+  o.fill_holes = false;
+  Scene paper = scene();
+  const FrameTextures p0 = paper.run(o, false);
+  ASSERT_EQ(paper.patches.patches.size(), 3u);
+  const uint64_t crescent = p0.stats.texels_per_patch[1];
+  EXPECT_GT(crescent, 20u);
+
+  o.merge = 0.1;  // 0.1 pi (r / texel)^2 = 206 texels
+  Scene sc = scene();
+  const FrameTextures f0 = sc.run(o, false);
+  EXPECT_EQ(f0.stats.retired_merged, 1u);
+  ASSERT_EQ(sc.patches.patches.size(), 2u);
+  EXPECT_EQ(sc.patches.patches[0].id, 0u);
+  EXPECT_EQ(sc.patches.patches[1].id, 2u);
+  EXPECT_TRUE(f0.aov.pixels == p0.aov.pixels);  // the frame itself is the paper's
+  const FrameTextures f1 = sc.run(o, false);
+  EXPECT_EQ(f1.stats.covered_texels, p0.stats.covered_texels);
+  EXPECT_EQ(f1.stats.texels_per_patch[0], p0.stats.texels_per_patch[0]);
+  EXPECT_EQ(f1.stats.texels_per_patch[1], p0.stats.texels_per_patch[2] + crescent);
+  EXPECT_EQ(f1.stats.retired_merged, 0u);
+}
+
+}  // namespace
+}  // namespace lapflow

@@ -66,7 +66,7 @@ struct FrameMetrics {
   std::optional<std::size_t> born, died;  ///< from NAME.stats.jsonl (died = retired + lost)
   /// The population, from NAME.stats.jsonl when the bake wrote it: patches
   /// alive, a fresh seeding's count, and deaths by cause.
-  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden;
+  std::optional<std::size_t> alive, fresh_seeding, died_projection, died_eroded, died_hidden, died_merged;
   // Drift at rest, at fixed surface points: this frame's covered chart
   // texels with |v| <= min_speed, each located on the previous frame's mesh
   // by closest point (then barycentrics, atlas uv, the texel there). Points

@@ -42,7 +42,7 @@ struct FrameStats {
   /// ones split into eroded away (no vertex weight reaches epsilon, or every
   /// triangle over delta-max) and hidden (under older patches: it kept
   /// nothing visible).
-  std::size_t retired_eroded = 0, retired_hidden = 0;
+  std::size_t retired_eroded = 0, retired_hidden = 0, retired_merged = 0;
   /// Patches a fresh Poisson seeding of this frame would create (the
   /// population's yardstick).
   std::size_t fresh_seeding = 0;

@@ -56,6 +56,11 @@ struct RasterOptions {
   /// on every shared scene; false = the paper's memoryless test.
   bool hold = false;
   double hold_margin = 0.05;
+  /// Retire ("merge") a patch that won fewer texels than this fraction of
+  /// pi r^2 (in texels) when other patches pass the erosion test on every one
+  /// of them, so they take them over on the next frame. 0 = off (the paper
+  /// retires only patches that won nothing). docs/temporal.md.
+  double merge = 0.0;
 };
 
 /// Box-filtered mip pyramid of the exemplar's colour and displacement,
@@ -108,6 +113,7 @@ struct RasterStats {
   std::size_t patches_retired = 0;
   std::size_t retired_eroded = 0;  ///< of those: eroded away (no vertex w reaches epsilon, or every triangle too distorted)
   std::size_t retired_hidden = 0;  ///< of those: the rest, hidden under older patches
+  std::size_t retired_merged = 0;  ///< of those: small, their texels covered by others (RasterOptions::merge)
   std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
   std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
   double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
