@@ -86,6 +86,7 @@ void resolve_bake_options(BakeOptions& o) {
   o.raster.radius = o.patch.radius;
   o.raster.aov = o.aov;
   o.raster.gutter = o.atlas.gutter;
+  o.weights.keep_at_rest = o.raster.hold;
 }
 
 namespace {

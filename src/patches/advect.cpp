@@ -31,6 +31,7 @@ struct Moved {
   Vec3 position;
   int32_t triangle = -1;
   bool kept = false;
+  bool still = false;  ///< the velocity did not move it (before projection)
 };
 
 }  // namespace
@@ -95,9 +96,11 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       } else {
         x = patches.patches[i - nverts].center;
       }
+      const Vec3 x0 = x;
       x = advect(x, prev_triangle);
       Moved& m = moved[i];
       m.position = x;
+      m.still = x.x == x0.x && x.y == x0.y && x.z == x0.z;
       if (!is_finite(x)) continue;
       // Most advected points are within a small fraction of r of the new
       // surface: a small query radius lets Embree prune far more of its tree.
@@ -126,6 +129,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       Patch& patch = patches.patches[i];
       const Moved* mv = moved.data() + offset[i];
       const std::size_t n = patch.positions.size();
+      patch.at_rest = std::all_of(mv, mv + n, [](const Moved& m) { return m.still; });
       // A centre that left the surface keeps its advected position: it only
       // marks where the patch was born.
       const Moved& c = moved[nverts + i];
@@ -162,12 +166,15 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
         std::vector<Vec3> pos;
         std::vector<Vec2> uv;
         std::vector<int32_t> st;
+        std::vector<float> w;  // the weights follow their vertices (WeightOptions::keep_at_rest)
+        const bool has_weights = patch.weight.size() == n;
         pos.reserve(n), uv.reserve(n), st.reserve(n);
         for (std::size_t v = 0; v < n; ++v) {
           if (!used[v]) continue;
           remap[v] = int32_t(pos.size());
           pos.push_back(mv[v].position);
           uv.push_back(patch.rest_uv[v]);
+          if (has_weights) w.push_back(patch.weight[v]);
           st.push_back(mv[v].triangle);
           per_patch[i].residual = std::max(per_patch[i].residual, residual(v));
         }
@@ -178,6 +185,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
         patch.rest_uv = std::move(uv);
         patch.surface_triangle = std::move(st);
         patch.triangles = std::move(tris);
+        if (has_weights) patch.weight = std::move(w);
       }
     }
   }, 8);

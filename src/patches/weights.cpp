@@ -99,15 +99,19 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
       if (uses == 1) on_boundary[a] = on_boundary[upper[i]] = 1;
     }
 
+  const bool keep = options.keep_at_rest && patch.at_rest && patch.weight.size() == nv;
   patch.quality.assign(nv, 0.f);
   patch.border.assign(nv, 0);
-  patch.weight.assign(nv, 0.f);
+  if (!keep) patch.weight.assign(nv, 0.f);
   const Vec2 centre{0.5, 0.5};
   for (std::size_t v = 0; v < nv; ++v) {
     patch.quality[v] = count[v] ? float(sum[v] / count[v]) : 0.f;
     const bool near_centre = norm(patch.rest_uv[v] - centre) <= options.center_radius;
     patch.border[v] = (!on_boundary[v] || near_centre) ? 1 : 0;
-    patch.weight[v] = patch.quality[v] * float(patch.border[v]);
+    // At rest a vertex keeps its weight, but a border it gained (a triangle
+    // lost to projection) still zeroes it.
+    if (!keep) patch.weight[v] = patch.quality[v] * float(patch.border[v]);
+    else if (!patch.border[v]) patch.weight[v] = 0.f;
   }
 }
 

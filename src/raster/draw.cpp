@@ -834,7 +834,12 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           // (mark_held): near a seam the texels of two charts sample the same
           // surface at arbitrary offsets, and a cell marked from one chart
           // would let the patch take a texel of the other that it just lost.
-          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i]) && interior_texel(i, x, y))
+          // A texel of a small hole closed by a patch at rest marks too: the
+          // next frame gives the region back to it (close_held_texels)
+          // instead of closing it anew from whichever neighbour comes first.
+          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i] ||
+                       (patch.at_rest && !ctx.closed.empty() && ctx.closed[i])) &&
+              interior_texel(i, x, y))
             mark_held(p, u, v, cur->ux, cur->uy);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }

@@ -142,7 +142,8 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   std::vector<uint32_t> chart_texels(std::size_t(std::max(ctx.atlas.chart_count, 0)), 0);
   if (max_closed_depth > 0)
     for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
-  std::vector<uint8_t> closed_texel(max_closed_depth > 0 ? tm.size() : 0, 0);
+  std::vector<uint8_t>& closed_texel = ctx.closed;
+  closed_texel.assign(max_closed_depth > 0 ? tm.size() : 0, 0);
   std::vector<int32_t> depth;  // per chart texel: layer inside its hole (hole_depth's scratch)
   // A fluid triangle where a seed failed (no patch, or a newborn that does
   // not keep its own centre) is not seeded again: its texels go to
@@ -289,11 +290,17 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
   const TexelMap& tm = ctx.atlas.texels;
   const int N = ctx.N;
   std::size_t closed = 0;
-  // Two Jacobi sweeps: a held point at most two texel layers into a hole.
-  for (int sweep = 0; sweep < 2; ++sweep) {
-    const std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
-    if (open.empty()) break;
-    std::vector<uint64_t> next(open.size(), kNoKey);
+  // Jacobi sweeps: a held point at most two texel layers into a hole; deeper
+  // only for a patch at rest, whose closed regions are held too (resolve),
+  // so that a region held still stays with its patch however wide it grew.
+  // A patch the flow moves keeps only the two layers: its erosion goes on.
+  constexpr int kAnySweeps = 2, kMaxSweeps = 64;
+  std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
+  std::vector<uint64_t> next;
+  std::vector<uint32_t> still;
+  for (int sweep = 0; sweep < kMaxSweeps && !open.empty(); ++sweep) {
+    const bool rest_only = sweep >= kAnySweeps;
+    next.assign(open.size(), kNoKey);
     parallel_for(open.size(), [&](std::size_t b, std::size_t e) {
       std::vector<uint64_t> tried;
       for (std::size_t j = b; j < e; ++j) {
@@ -307,7 +314,7 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
           if (key == kNoKey || key >= best || std::find(tried.begin(), tried.end(), key) != tried.end()) return;
           tried.push_back(key);
           const Patch& patch = patches.patches[std::size_t(key >> 32)];
-          if (patch.held.empty()) return;
+          if (patch.held.empty() || (rest_only && !patch.at_rest)) return;
           const int ti = int(key & 0xffffffffu);
           Vec2 P[3];
           if (!winner_pixels(ctx, patch, ti, tri, P)) return;
@@ -325,10 +332,17 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
       }
     }, 256);
     std::size_t changed = 0;
-    for (std::size_t j = 0; j < open.size(); ++j)
-      if (next[j] != kNoKey) ctx.keys[open[j]] = next[j], mark_extrapolated(ctx, open[j]), ++changed;
+    still.clear();
+    for (std::size_t j = 0; j < open.size(); ++j) {
+      if (next[j] == kNoKey) {
+        still.push_back(open[j]);
+        continue;
+      }
+      ctx.keys[open[j]] = next[j], mark_extrapolated(ctx, open[j]), ++changed;
+    }
     closed += changed;
     if (changed == 0) break;
+    open.swap(still);
   }
   return closed;
 }

@@ -73,6 +73,9 @@ struct RasterContext {
   /// Per chart texel, set by fill_holes: its key was taken from a neighbour
   /// or the nearest patch (closed or forced), not won by the erosion test.
   std::vector<uint8_t> extrapolated;
+  /// Per chart texel, set by fill_holes: in a small hole closed by its
+  /// neighbours (RasterOptions::small_hole). Empty when none was.
+  std::vector<uint8_t> closed;
   /// Per patch index, kHeldWords words: the cells of Patch::held for the
   /// next frame, marked by resolve_texels and moved into the patches by
   /// retire_patches (empty when RasterOptions::hold is off).
@@ -144,6 +147,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
 std::size_t propagate_keys(RasterContext& ctx);
 
 /// Before hole filling (RasterOptions::hold): hole texels up to two layers
+/// (any depth for a patch at rest, Patch::at_rest)
 /// deep take a neighbour's patch where that patch's map, extended to them,
 /// lands in a cell it holds. Returns the texels so closed.
 std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches);

@@ -208,7 +208,7 @@ void write_sphere_sequence(const std::string& dir, int frames, const Vec3& veloc
 /// level set (OpenVDB, voxels of 4 cm) whose grid is offset by a different
 /// sub-voxel amount every frame, as a simulator re-meshes a liquid at rest:
 /// the same shape, a new triangulation, no velocity.
-void write_remeshed_drop(const std::string& dir, int frames, double noise) {
+void write_remeshed_drop(const std::string& dir, int frames, double noise, double settle = 0) {
   static std::once_flag vdb_init;
   std::call_once(vdb_init, [] { openvdb::initialize(); });
   constexpr double kVoxel = 0.04;
@@ -224,9 +224,12 @@ void write_remeshed_drop(const std::string& dir, int frames, double noise) {
     TriMesh m;
     for (const auto& p : points) {
       // Solver noise: each vertex off the shape by up to `noise` along the normal.
-      const Vec3 q = Vec3{p.x(), p.y(), p.z()} - offset;
+      Vec3 q = Vec3{p.x(), p.y(), p.z()} - offset;
       const double jitter = noise * (2 * hash_to_unit(hash64(uint64_t(f), m.positions.size(), 4)) - 1);
-      m.positions.push_back(q * (1 + jitter / std::max(norm(q), 1e-9)));
+      q = q * (1 + jitter / std::max(norm(q), 1e-9));
+      // Settling: flatter by `settle` a frame, wider at the same volume.
+      const double sz = std::pow(1 - settle, f - 1), sxy = 1 / std::sqrt(sz);
+      m.positions.push_back({q.x * sxy, q.y * sxy, q.z * sz});
     }
     for (const auto& t : tris) m.triangles.push_back({int32_t(t[0]), int32_t(t[1]), int32_t(t[2])});
     for (const auto& q : quads) {
@@ -455,6 +458,42 @@ TEST(Eval, StillRemeshedDropHoldsStillAtFixedPoints) {
     // depends on where each atlas samples the surface.
     EXPECT_GT(m.drift_texel, 0.0) << "frame " << m.frame;
   }
+}
+
+TEST(Eval, SettlingDropAtRestKeepsItsPatches) {
+  // A drop that settles below --min-speed: re-meshed every frame and 1.5%
+  // flatter (wider at the same volume) each frame, with no velocity, as
+  // viscous_drop's puddle spreads at 2-4 cm/s. The shape change alone
+  // distorts the patches: the paper's memoryless erosion opens holes and
+  // breeds patches at rest. With the hold, patches at rest keep their
+  // weights and the regions they closed: no birth after frame 2, the same
+  // patches alive, and the fixed points keep their texture.
+  TempDir in("eval_settle_in"), paper("eval_settle_paper"), held("eval_settle_held");
+  constexpr int kFrames = 8;
+  write_remeshed_drop(in.str(), kFrames, 0.001, 0.015);
+  BakeOptions o = small_bake(in.str(), paper.str());
+  o.allow_zero_velocity = true;
+  o.atlas.resolution = 1024;
+  run_bake(o);
+  o.out_dir = held.str();
+  o.raster.hold = true;
+  o.raster.small_hole = 0.25;
+  run_bake(o);
+  const EvalReport a = evaluate_bake(paper.str()), b = evaluate_bake(held.str());
+  ASSERT_EQ(a.frames.size(), std::size_t(kFrames));
+  ASSERT_EQ(b.frames.size(), std::size_t(kFrames));
+  std::size_t paper_born = 0;
+  for (std::size_t k = 2; k < kFrames; ++k) {
+    const FrameMetrics& m = b.frames[k];
+    ASSERT_TRUE(m.born.has_value() && a.frames[k].born.has_value());
+    paper_born += *a.frames[k].born;
+    EXPECT_EQ(*m.born, 0u) << "frame " << m.frame;
+    EXPECT_EQ(m.alive, b.frames[1].alive) << "frame " << m.frame;
+    EXPECT_LT(m.drift, 0.005) << "frame " << m.frame;
+    EXPECT_LT(m.popping, 0.001) << "frame " << m.frame;
+    EXPECT_EQ(m.coverage, 1.0) << "frame " << m.frame;
+  }
+  EXPECT_GT(paper_born, 0u) << "the settling must erode the paper's patches, or this test shows nothing";
 }
 
 TEST(Eval, SameNumbersForOneAndTwoThreadsAndOwnExemplarIsClosest) {

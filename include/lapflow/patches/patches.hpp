@@ -37,6 +37,11 @@ struct Patch {
   /// a slack (RasterOptions::hold): hysteresis in patch space, so a texel
   /// does not change hands when only the atlas's sampling moved.
   std::vector<uint64_t> held;
+  /// The velocity moved none of its vertices on the last advection (every
+  /// sample zero, as below --min-speed): the liquid under it is at rest, so
+  /// the rasterizer holds what it closed there too (RasterOptions::hold;
+  /// docs/temporal.md). False for a patch born this frame.
+  bool at_rest = false;
 
   bool alive() const { return !triangles.empty(); }
   std::size_t vertex_count() const { return positions.size(); }
@@ -119,6 +124,11 @@ struct AdvectOptions {
 struct WeightOptions {
   double delta_max = 3.0;        ///< distortion at which Q_T reaches 0
   double center_radius = 0.125;  ///< rest-uv distance from (0.5,0.5) where B_V = 1 on the boundary
+  /// A patch at rest (Patch::at_rest) keeps the weights it had: where the
+  /// velocity is zero the texture must not change, and a surface that is
+  /// re-meshed or creeps below --min-speed would otherwise erode it
+  /// (docs/temporal.md). Set with RasterOptions::hold.
+  bool keep_at_rest = false;
 };
 
 /// Poisson-disk samples on the surface: minimum EUCLIDEAN distance
