@@ -1,5 +1,7 @@
 #include "lapflow/io/atomic_file.hpp"
 
+#include <sys/resource.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -113,6 +115,21 @@ void StagedFiles::abandon() {
   for (const Entry& e : entries_)
     if (!e.tmp.empty()) remove_quietly(e.tmp);
   entries_.clear();
+}
+
+std::string write_failure_reason(const std::string& path) {
+  const fs::path p(path);
+  struct statvfs fsinfo {};
+  const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+  // Root may also fill the blocks reserved for it.
+  if (::statvfs(dir.c_str(), &fsinfo) == 0 && (::geteuid() == 0 ? fsinfo.f_bfree : fsinfo.f_bavail) == 0)
+    return std::generic_category().message(ENOSPC);
+  rlimit limit{};
+  std::error_code ec;
+  const std::uintmax_t size = fs::file_size(p, ec);
+  if (!ec && ::getrlimit(RLIMIT_FSIZE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY && size >= limit.rlim_cur)
+    return std::generic_category().message(EFBIG);
+  return "";
 }
 
 std::vector<std::string> remove_stale_temporaries(const std::string& dir,

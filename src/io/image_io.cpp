@@ -108,6 +108,16 @@ void check_channels(const std::string& path, const Image& img) {
     throw OutputError(path + ": cannot write an empty or inconsistent image");
 }
 
+// A failed write through OIIO: OpenEXR says only "File output failed", so
+// the reason is looked up (full disk, file-size limit), and the temporary
+// name in the library's text becomes the file's own.
+OutputError write_failure(const std::string& path, const std::string& tmp, std::string library_text) {
+  const std::string name = std::filesystem::path(path).filename().string();
+  for (std::size_t at; (at = library_text.find(tmp)) != std::string::npos;) library_text.replace(at, tmp.size(), name);
+  const std::string reason = write_failure_reason(tmp);
+  return OutputError(path + ": write failed: " + (reason.empty() ? library_text : reason + " (" + library_text + ")"));
+}
+
 // Writes `data` (already in the file's value range) through OIIO to tmp.
 void write_oiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
                 OIIO::TypeDesc data_type, const void* data) {
@@ -118,9 +128,9 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
   if (!out->write_image(data_type, data)) {
     const std::string err = one_line(out->geterror());
     out->close();
-    throw OutputError(path + ": write failed: " + err);
+    throw write_failure(path, tmp, err);
   }
-  if (!out->close()) throw OutputError(path + ": write failed: " + one_line(out->geterror()));
+  if (!out->close()) throw write_failure(path, tmp, one_line(out->geterror()));
 }
 
 // float -> half, round to nearest even (what Imath::half and OIIO's own

@@ -65,6 +65,12 @@ class StagedFiles {
   std::vector<Entry> entries_;
 };
 
+/// Why writing `path` (a file being written) may have failed when the
+/// library that wrote it does not say: "No space left on device" when its
+/// file system has no free block, "File too large" when it reached the
+/// process's file-size limit (RLIMIT_FSIZE); "" when neither.
+std::string write_failure_reason(const std::string& path);
+
 /// Removes the temporary files that earlier, killed runs left in `dir` for
 /// files whose name (before the extension) is one of `stems` or matches a
 /// stem pattern: `stem_patterns` are ECMAScript regexes (`NAME\.color\.\d+`).
