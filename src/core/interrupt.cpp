@@ -31,6 +31,8 @@ struct Slot {
 Slot g_slots[kSlots];
 std::atomic<int> g_stop{0};
 std::atomic<int> g_last_frame{INT_MIN};  // INT_MIN: no frame complete yet
+struct sigaction g_previous_int, g_previous_term, g_previous_xfsz;
+bool g_installed = false;
 
 void say(const char* text) {
   ssize_t ignored = ::write(STDERR_FILENO, text, std::strlen(text));
@@ -87,12 +89,22 @@ void install_stop_handlers() {
   sa.sa_handler = on_stop_signal;
   sigemptyset(&sa.sa_mask);
   sa.sa_flags = SA_RESTART;  // the loop polls the flag; blocking calls just go on
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
   struct sigaction ignore {};
   ignore.sa_handler = SIG_IGN;
   sigemptyset(&ignore.sa_mask);
-  sigaction(SIGXFSZ, &ignore, nullptr);
+  if (g_installed) return;
+  sigaction(SIGINT, &sa, &g_previous_int);
+  sigaction(SIGTERM, &sa, &g_previous_term);
+  sigaction(SIGXFSZ, &ignore, &g_previous_xfsz);
+  g_installed = true;
+}
+
+void restore_stop_handlers() {
+  if (!g_installed) return;
+  sigaction(SIGINT, &g_previous_int, nullptr);
+  sigaction(SIGTERM, &g_previous_term, nullptr);
+  sigaction(SIGXFSZ, &g_previous_xfsz, nullptr);
+  g_installed = false;
 }
 
 int stop_signal() { return g_stop.load(); }

@@ -20,6 +20,10 @@ namespace lapflow {
 /// temporary file, prints the last complete frame and calls _exit(128 + sig).
 void install_stop_handlers();
 
+/// Puts back the handlers install_stop_handlers() replaced (a command that
+/// goes on with other work after its bake, such as `lapflow demo`).
+void restore_stop_handlers();
+
 /// The signal that asked the process to stop (SIGINT, SIGTERM), or 0.
 int stop_signal();
 
