@@ -165,9 +165,11 @@ class BakeSignals : public ::testing::Test {
   /// Starts a bake, waits for frame 1's OBJ and then `delay` of a frame's
   /// time (0.3: frame 2 is computing), sends `signals`, each after the
   /// previous one was handled (two pending signals would merge into one),
-  /// and checks what every stop must leave: no temporary file, and only
-  /// whole frames identical to an uninterrupted bake's. Returns the result
-  /// and the frames present.
+  /// and checks what every stop must leave: only whole frames, 1..k,
+  /// identical to an uninterrupted bake's; after SIGINT or SIGTERM no
+  /// temporary file either. After a SIGKILL, which nothing can clean up
+  /// after, it re-runs the bake: no temporary file, every frame identical.
+  /// Returns the stopped run's result and the frames it left.
   std::pair<Result, std::vector<int>> bake_and_stop(const std::vector<int>& signals, double delay) {
     TempDir out("signals_out"), scratch("signals_err");
     const std::string err = scratch / "stderr.txt";
@@ -185,19 +187,27 @@ class BakeSignals : public ::testing::Test {
       }
       ::kill(pid, signals[i]);
     }
-    Result r{wait_for(pid), test::read_bytes(err)};
-    EXPECT_TRUE(temporaries_in(out.str()).empty()) << ::testing::PrintToString(temporaries_in(out.str()));
+    const Result r{wait_for(pid), test::read_bytes(err)};
+    const bool killed = signals == std::vector<int>{SIGKILL};
+    if (!killed) {
+      EXPECT_TRUE(temporaries_in(out.str()).empty()) << ::testing::PrintToString(temporaries_in(out.str()));
+    }
     const std::vector<int> present = expect_whole_frames_identical_to(out.str(), ref_->str(), kFrames);
     EXPECT_FALSE(present.empty());
     EXPECT_LT(present.size(), std::size_t(kFrames)) << "the bake ended before the signal: make the frames slower";
-    // Frames are complete in order: 1..k.
     for (std::size_t i = 0; i < present.size(); ++i) EXPECT_EQ(present[i], int(i) + 1);
-    if (signals.size() == 1) {
+    if (signals.size() == 1 && !killed) {
       // A clean stop: the frames after the last complete one have no file
       // at all, and the stats have one line per complete frame.
       for (int f = int(present.size()) + 1; f <= kFrames; ++f)
         for (const char* kind : kFrameFiles) EXPECT_FALSE(fs::exists(frame_file(out.str(), kind, f)));
       EXPECT_EQ(lines_in(out / "t.stats.jsonl"), present.size());
+    }
+    if (killed) {
+      const Result again = run_lapflow(bake_args(meshes_->str(), out.str()), scratch);
+      EXPECT_EQ(again.exit_code, 0) << again.err;
+      EXPECT_TRUE(temporaries_in(out.str()).empty()) << ::testing::PrintToString(temporaries_in(out.str()));
+      EXPECT_EQ(expect_whole_frames_identical_to(out.str(), ref_->str(), kFrames).size(), std::size_t(kFrames));
     }
     return {r, present};
   }
@@ -232,6 +242,15 @@ TEST_F(BakeSignals, ASecondSigintStopsAtOnceWithoutAHalfFile) {
   const auto [r, present] = bake_and_stop({SIGINT, SIGINT}, 0.3);
   EXPECT_EQ(r.exit_code, 130) << r.err;
   EXPECT_NE(r.err.find("SIGINT again: stopped at once, temporary files removed"), std::string::npos) << r.err;
+}
+
+// A SIGKILL while frame 2 is being written (the last tenth of its time):
+// frame 1 whole, frame 2 whole or without its OBJ, and a re-run removes the
+// temporary files the kill left and bakes every frame as an uninterrupted
+// bake does.
+TEST_F(BakeSignals, AKillLeavesWholeFramesAndAReRunCleansUp) {
+  const auto [r, present] = bake_and_stop({SIGKILL}, 0.95);
+  EXPECT_EQ(r.exit_code, -SIGKILL);
 }
 
 // ----------------------------------------------------------- exit codes --
