@@ -143,7 +143,7 @@ std::size_t lines_in(const std::string& path) {
 
 class BakeSignals : public ::testing::Test {
  protected:
-  static constexpr int kFrames = 8;
+  static constexpr int kFrames = 5;
   static void SetUpTestSuite() {
     meshes_ = new TempDir("signals_in");
     ref_ = new TempDir("signals_ref");
