@@ -5,12 +5,19 @@
 
 #include "cli_common.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/interrupt.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/bake/bake.hpp"
 
 namespace lapflow::cli {
 
 void bake_with_progress(BakeOptions& o) {
+  // From here a SIGINT / SIGTERM stops the bake between frames (exit 130 /
+  // 143), and a second one at once; neither leaves a half file.
+  install_stop_handlers();
+  struct Restore {
+    ~Restore() { restore_stop_handlers(); }
+  } restore;  // `lapflow demo` goes on to render previews: Ctrl-C must stop it as usual
   resolve_bake_options(o);
 
   const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
@@ -75,10 +82,16 @@ void add_bake_command(CLI::App& app) {
       "  NAME.aov.N.exr            patch_id u v w per texel (with --aov)\n"
       "  NAME.patches.N.ply        the patches (with --dump-patches)\n"
       "  NAME.stats.jsonl          one JSON line per frame: counts, coverage, seconds per stage, memory\n"
-      "Every file is written to a temporary name and renamed: an interrupted bake never leaves half files.\n\n"
+      "Every file of a frame is written to a temporary name; they are renamed into place together, the OBJ\n"
+      "last: a frame whose OBJ is there is complete. A bake first removes the temporary files (.NAME.*.tmp*)\n"
+      "that killed runs of it left in --out. SIGINT or SIGTERM stops at the next frame boundary (a frame being\n"
+      "written is finished, one being computed is dropped); a second one stops at once. Neither leaves a\n"
+      "temporary file.\n\n"
       "A scene file (lapflow bake scene.toml) holds the same options as keys (mesh = \"...\", radius = 0.05);\n"
       "options given on the command line override it. Paths in it are relative to the file.\n\n"
-      "Exit codes: 0 ok, 2 bad input or usage (the message names the file, frame and element), 1 internal error.");
+      "Exit codes: 0 ok, 2 bad input or usage (the message names the file, frame and element) or an output\n"
+      "problem (--out not a writable folder, disk full: the message names the folder or file), 130 / 143\n"
+      "stopped by SIGINT / SIGTERM (the message names the last complete frame), 1 internal error.");
   add_bake_options(*cmd, c);
   add_global_options(*cmd);
   cmd->callback([] { run_bake(c); });

@@ -1,6 +1,7 @@
 // lapflow: deformable lapped textures on animated liquid surfaces.
 // The command line: parse, validate, call the library. Exit codes: 0 ok,
-// 2 bad input or usage, 1 internal error.
+// 2 bad input, usage or an output problem, 130 / 143 stopped by SIGINT /
+// SIGTERM, 1 internal error.
 #include <algorithm>
 #include <exception>
 #include <string>
@@ -25,7 +26,10 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   app.set_version_flag("--version", "lapflow 0.1.0");
-  app.footer("Run 'lapflow <command> --help' for a command's options.\nExit codes: 0 ok, 2 bad input or usage, 1 internal error.");
+  app.footer(
+      "Run 'lapflow <command> --help' for a command's options.\nExit codes: 0 ok, 2 bad input, usage or output "
+      "problem (a folder or file that cannot be written, disk full), 130/143 a bake stopped by SIGINT/SIGTERM, "
+      "1 internal error.");
   cli::add_demo_command(app);
   cli::add_inspect_command(app);
   cli::add_atlas_command(app);
@@ -50,6 +54,12 @@ int main(int argc, char** argv) {
   } catch (const UsageError& e) {
     fmt::print(stderr, "error: {}\n", e.what());
     return cli::kBadInput;
+  } catch (const OutputError& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return cli::kBadInput;
+  } catch (const Interrupted& e) {
+    fmt::print(stderr, "lapflow: {}\n", e.what());
+    return 128 + e.signal();
   } catch (const std::bad_alloc&) {
     fmt::print(stderr, "error: out of memory\n");
     return cli::kInternal;

@@ -1,9 +1,12 @@
 // The bake: the frame loop, one visible call per step of ALGORITHM.md.
 #include "lapflow/bake/bake.hpp"
 
+#include <fcntl.h>
 #include <malloc.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <climits>
 #include <cmath>
 #include <filesystem>
@@ -13,6 +16,8 @@
 #include "bake/writer.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/interrupt.hpp"
+#include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/mesh_io.hpp"
 
@@ -114,6 +119,33 @@ void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats&
   st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
 }
 
+/// --out: created when missing, a writable folder, and rid of the temporary
+/// files that killed runs of this bake left there. Throws OutputError naming
+/// the folder.
+void prepare_output_folder(const BakeOptions& o) {
+  const std::string& dir = o.out_dir;
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw OutputError(dir + ": the output folder (--out) is a file, not a folder");
+  fs::create_directories(dir, ec);
+  if (ec) throw OutputError(dir + ": cannot create the output folder (--out): " + ec.message());
+  // The effective user's rights (root passes permission bits, but not a
+  // read-only file system).
+  if (::faccessat(AT_FDCWD, dir.c_str(), W_OK | X_OK, AT_EACCESS) != 0)
+    throw OutputError(dir + ": cannot write in the output folder (--out): " +
+                      std::generic_category().message(errno));
+  remove_stale_temporaries(dir, bake_file_stem_patterns(o.name));
+}
+
+/// A SIGINT or SIGTERM asked to stop: the frame in hand has no file yet and
+/// is abandoned; a frame still being written in the background is finished.
+void stop_if_asked(detail::FrameWriter& writer) {
+  if (const int signal = stop_signal()) {
+    writer.finish();
+    throw Interrupted(signal, writer.last_complete_frame());
+  }
+}
+
 }  // namespace
 
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
@@ -121,9 +153,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
   const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
   const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
-  std::error_code ec;
-  fs::create_directories(o.out_dir, ec);
-  if (ec) throw OutputError(o.out_dir + ": cannot create the output folder: " + ec.message());
+  prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
   const BakeManifest manifest = make_bake_manifest(o, frames);
   write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
@@ -134,6 +164,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   std::shared_ptr<const Frame> prev;
   try {
     for (std::size_t left = frames.size(); left > 0; --left) {
+      stop_if_asked(writer);
       Stopwatch frame_clock, clock;
       // Read ahead: mesh, surface query, velocity, and step 6, the frame's
       // own atlas (it needs only the mesh).
@@ -180,16 +211,17 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       dilate_gutter(cur.raster, cur.textures);
       st.seconds_dilate = clock.lap();
 
-      // Step 10: the frame's files, each atomically; its stats line follows
-      // when they are all on disk.
+      // Step 10: the frame's files, under temporary names and renamed into
+      // place together, the OBJ last; its stats line follows.
       record_frame_stats(cur, patches, st);
+      stop_if_asked(writer);
       writer.write(frame, patches, frame_clock.total());
       prev = frame;
     }
     writer.finish();
   } catch (...) {
-    // A bad frame stops the bake; the frame already computed is still written
-    // in full (its files and stats line), then the error goes up.
+    // A bad frame or a stop ends the bake; the frame already computed is
+    // still written in full (its files and stats line), then the error goes up.
     try {
       writer.finish();
     } catch (...) {

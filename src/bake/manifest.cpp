@@ -6,6 +6,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <string_view>
 
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/errors.hpp"
@@ -38,6 +39,16 @@ RasterMode parse_raster_mode(const std::string& name) {
   if (name == "blend") return RasterMode::Blend;
   if (name == "advect") return RasterMode::NoErosion;
   throw UsageError("unknown mode '" + name + "' (expected erosion, blend or advect)");
+}
+
+std::vector<std::string> bake_file_stem_patterns(const std::string& name) {
+  std::string n;
+  for (char c : name) {
+    if (std::string_view("\\^$.|?*+()[]{}").find(c) != std::string_view::npos) n += '\\';
+    n += c;
+  }
+  // The kinds of frame_file() below, and the two files of the whole bake.
+  return {n + "\\.(color|disp|aov|patches)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
 }
 
 std::string bake_manifest_path(const std::string& dir, const std::string& name) {

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/atomic_file.hpp"
@@ -62,29 +63,34 @@ double FrameWriter::write_files(const Job& w) const {
   const BakeOptions& o = options_;
   const int f = w.frame;
   const std::string color = names_.frame_file("color", f), disp = names_.frame_file("disp", f);
+  const std::string obj = names_.frame_file("obj", f);
+  // Every file under a temporary name first; the frame appears only when
+  // all of them are written (docs/bake.md, "When a frame is there").
+  StagedFiles staged;
   std::vector<std::function<void()>> jobs;
-  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr); });
-  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr); });
+  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr, &staged); });
+  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr, &staged); });
   if (o.aov)
     jobs.push_back([&] {
       // Data: float, and never lossy.
       const ExrCompression lossless =
           o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
       write_exr(names_.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
-                {ExrPixelType::Float, lossless});
+                {ExrPixelType::Float, lossless}, &staged);
     });
   jobs.push_back([&] {
     UvMeshMaterial material;
     material.name = o.name;
     material.color_texture = fs::path(color).filename().string();
     material.displacement_texture = fs::path(disp).filename().string();
-    write_uv_mesh_obj(names_.frame_file("obj", f), w.surface->mesh, w.atlas, material);
+    write_uv_mesh_obj(obj, w.surface->mesh, w.atlas, material, &staged);
   });
-  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names_.frame_file("patches", f), w.patches); });
+  if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names_.frame_file("patches", f), w.patches, &staged); });
   if (o.background_write) {
     // One after the other on this thread (OpenEXR compresses on its own
     // pool): the writer must not take the TBB workers the next frame needs.
     for (const auto& job : jobs) job();
+    staged.commit(obj);
     return clock.lap();
   }
   // Nothing else runs: the files are written concurrently (OIIO converts
@@ -101,7 +107,9 @@ double FrameWriter::write_files(const Job& w) const {
     }
   }, 1);
   for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
+    if (e) std::rethrow_exception(e);  // `staged` removes the frame's temporary files
+  // The OBJ is the frame's commit file: renamed last, after every other file.
+  staged.commit(obj);
   return clock.lap();
 }
 
@@ -129,6 +137,8 @@ void FrameWriter::finish() {
   pending_stats_.peak_rss_mb = peak_rss_mb();
   stats_text_ += stats_json(pending_stats_).dump() + "\n";
   write_text_atomically(stats_path_, stats_text_);
+  last_complete_frame_ = pending_stats_.frame;
+  note_complete_frame(pending_stats_.frame);
   if (on_frame_) on_frame_(pending_stats_);
 }
 

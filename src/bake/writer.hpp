@@ -5,6 +5,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "lapflow/bake/bake.hpp"
@@ -23,6 +24,8 @@ class FrameWriter {
   void write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds);
   /// Waits for the frame in flight, if any; rethrows its write error.
   void finish();
+  /// The last frame whose files and stats line are all written, if any.
+  std::optional<int> last_complete_frame() const { return last_complete_frame_; }
 
  private:
   struct Job;
@@ -35,6 +38,7 @@ class FrameWriter {
   std::future<double> pending_;
   FrameStats pending_stats_;
   double pending_compute_seconds_ = 0;
+  std::optional<int> last_complete_frame_;
 };
 
 }  // namespace lapflow::detail

@@ -1,5 +1,7 @@
 #include "lapflow/core/errors.hpp"
 
+#include <csignal>
+
 namespace lapflow {
 namespace {
 std::string compose(const std::string& file, const std::string& message, std::optional<int> frame) {
@@ -7,9 +9,20 @@ std::string compose(const std::string& file, const std::string& message, std::op
   if (frame) s += " (frame " + std::to_string(*frame) + ")";
   return s + ": " + message;
 }
+
+std::string stop_message(int signal, std::optional<int> last) {
+  const std::string name = signal == SIGINT ? "SIGINT" : signal == SIGTERM ? "SIGTERM" : "signal " + std::to_string(signal);
+  return "stopped by " + name + "; " +
+         (last ? "the last complete frame is " + std::to_string(*last) : std::string("no frame is complete"));
+}
 }  // namespace
 
 InputError::InputError(const std::string& file, const std::string& message, std::optional<int> frame)
     : std::runtime_error(compose(file, message, frame)), file_(file), message_(message), frame_(frame) {}
+
+Interrupted::Interrupted(int signal, std::optional<int> last_complete_frame)
+    : std::runtime_error(stop_message(signal, last_complete_frame)),
+      signal_(signal),
+      last_complete_frame_(last_complete_frame) {}
 
 }  // namespace lapflow

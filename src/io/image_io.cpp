@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
+#include <cstdlib>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -107,6 +108,16 @@ void check_channels(const std::string& path, const Image& img) {
     throw OutputError(path + ": cannot write an empty or inconsistent image");
 }
 
+// A failed write through OIIO: OpenEXR says only "File output failed", so
+// the reason is looked up (full disk, file-size limit), and the temporary
+// name in the library's text becomes the file's own.
+OutputError write_failure(const std::string& path, const std::string& tmp, std::string library_text) {
+  const std::string name = std::filesystem::path(path).filename().string();
+  for (std::size_t at; (at = library_text.find(tmp)) != std::string::npos;) library_text.replace(at, tmp.size(), name);
+  const std::string reason = write_failure_reason(tmp);
+  return OutputError(path + ": write failed: " + (reason.empty() ? library_text : reason + " (" + library_text + ")"));
+}
+
 // Writes `data` (already in the file's value range) through OIIO to tmp.
 void write_oiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
                 OIIO::TypeDesc data_type, const void* data) {
@@ -117,9 +128,9 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
   if (!out->write_image(data_type, data)) {
     const std::string err = one_line(out->geterror());
     out->close();
-    throw OutputError(path + ": write failed: " + err);
+    throw write_failure(path, tmp, err);
   }
-  if (!out->close()) throw OutputError(path + ": write failed: " + one_line(out->geterror()));
+  if (!out->close()) throw write_failure(path, tmp, one_line(out->geterror()));
 }
 
 // float -> half, round to nearest even (what Imath::half and OIIO's own
@@ -241,7 +252,7 @@ void sample_bilinear(const Image& img, double u, double v, float* out) {
 }
 
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
-               const ExrOptions& options) {
+               const ExrOptions& options, StagedFiles* staged) {
   check_channels(path, img);
   if (int(channel_names.size()) != img.channels)
     throw std::invalid_argument(path + ": write_exr needs one channel name per channel");
@@ -262,18 +273,27 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
   spec.attribute("compression", compression);
   spec.attribute("oiio:ColorSpace", "Linear");
   spec.attribute("Software", "lapflow");
+  // No date in the header, so the same image always gives the same bytes (a
+  // digest can check a farm's or a re-run's frames). OIIO stamps the time
+  // as DateTime unless the spec has one; one that is not a string is
+  // dropped when the header is written, since EXR's capDate is a string.
+  // Debian's OIIO prints a debug line about each such drop unless told
+  // otherwise (OPENIMAGEIO_DEBUG still turns its debug output on).
+  static const bool quiet_oiio = [] { return std::getenv("OPENIMAGEIO_DEBUG") || OIIO::attribute("debug", 0); }();
+  (void)quiet_oiio;
+  spec.attribute("DateTime", 0);
   // OpenEXR keeps its own thread pool, separate from OIIO's "threads".
   OIIO::attribute("exr_threads", thread_count());
   if (options.type == ExrPixelType::Half) {
     const std::vector<uint16_t> half = to_half(img.pixels);
     write_atomically(path, [&](const std::string& tmp) {
       write_oiio(path, tmp, spec, OIIO::TypeDesc::HALF, half.data());
-    });
+    }, staged);
     return;
   }
   write_atomically(path, [&](const std::string& tmp) {
     write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
-  });
+  }, staged);
 }
 
 void write_png(const std::string& path, const Image& img, bool to_srgb, int bits) {

@@ -75,6 +75,37 @@ bool parse_double(std::string_view s, double& v) {
   return r.ec == std::errc() && r.ptr == s.data() + s.size();
 }
 
+/// A token of the file as an error message quotes it: at most 40 characters
+/// (a 5 MB number must not make a 5 MB message), bytes that are not
+/// printable ASCII escaped as \xHH.
+std::string quote_token(std::string_view token) {
+  constexpr std::size_t kShown = 40;
+  std::string out = "'";
+  for (unsigned char c : token.substr(0, kShown)) {
+    if (c >= 0x20 && c < 0x7f) {
+      out += char(c);
+    } else {
+      constexpr char hex[] = "0123456789abcdef";
+      out += "\\x";
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  out += token.size() > kShown ? "...' (" + std::to_string(token.size()) + " characters)" : std::string("'");
+  return out;
+}
+
+/// Why `token` is not a double: out of range, or not a number at all.
+std::string number_problem(std::string_view token) {
+  std::string_view s = token;
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  double v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  const bool whole = r.ptr == s.data() + s.size();
+  return quote_token(token) + (r.ec == std::errc::result_out_of_range && whole ? " is out of range for a double"
+                                                                               : " is not a number");
+}
+
 // ------------------------------------------------------------------ PLY ----
 
 enum class Scalar : uint8_t { i8, u8, i16, u16, i32, u32, f32, f64 };
@@ -468,7 +499,8 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
       double c[3];
       if (w.size() < 4) throw bad("malformed vertex: expected 'v x y z'");
       for (int k = 0; k < 3; ++k)
-        if (!parse_double(w[1 + k], c[k])) throw bad("malformed vertex: '" + std::string(w[1 + k]) + "' is not a number");
+        if (!parse_double(w[1 + k], c[k]))
+          throw bad("malformed vertex " + std::to_string(m.positions.size()) + ": " + number_problem(w[1 + k]));
       const Vec3 p{c[0], c[1], c[2]};
       if (!is_finite(p))
         throw bad("vertex " + std::to_string(m.positions.size()) + ": position is " + non_finite_word(p));
@@ -478,7 +510,7 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
       if (w.size() < 3) throw bad("malformed texture coordinate: expected 'vt u v'");
       for (int k = 0; k < 2; ++k)
         if (!parse_double(w[1 + k], c[k]) || !std::isfinite(c[k]))
-          throw bad("malformed texture coordinate: '" + std::string(w[1 + k]) + "' is not a finite number");
+          throw bad("malformed texture coordinate: " + quote_token(w[1 + k]) + " is not a finite number");
       vts.push_back({c[0], c[1]});
     } else if (w[0] == "f") {
       if (w.size() < 4) throw bad("malformed face: a face needs at least 3 vertices");
@@ -494,10 +526,10 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
             if (!tok.empty()) {
               const auto r = std::from_chars(tok.data(), tok.data() + tok.size(), t);
               if (r.ec != std::errc() || r.ptr != tok.data() + tok.size() || t == 0)
-                throw bad("malformed face: '" + std::string(w[k]) + "' has a bad texture coordinate index");
+                throw bad("malformed face: " + quote_token(w[k]) + " has a bad texture coordinate index");
               t = t > 0 ? t - 1 : int64_t(vts.size()) + t;
               if (t < 0 || t >= int64_t(vts.size()))
-                throw bad("texture coordinate index in '" + std::string(w[k]) + "' is out of range (" +
+                throw bad("texture coordinate index in " + quote_token(w[k]) + " is out of range (" +
                           std::to_string(vts.size()) + " defined so far)");
               poly_vt.push_back(t);
             } else {
@@ -511,7 +543,7 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
         int64_t idx = 0;
         const auto r = std::from_chars(tok.data(), tok.data() + tok.size(), idx);
         if (r.ec != std::errc() || r.ptr != tok.data() + tok.size() || tok.empty())
-          throw bad("malformed face: '" + std::string(w[k]) + "' is not a vertex index");
+          throw bad("malformed face: " + quote_token(w[k]) + " is not a vertex index");
         if (idx == 0) throw bad("vertex index 0 is invalid (OBJ indices start at 1)");
         // Negative indices count back from the last vertex defined so far.
         const int64_t resolved = idx > 0 ? idx - 1 : int64_t(m.positions.size()) + idx;
@@ -531,7 +563,7 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
       // carry nothing lapflow needs; anything that is not a keyword is garbage.
       for (char c : w[0])
         if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_'))
-          throw bad("malformed line: '" + std::string(w[0].substr(0, 40)) + "' is not an OBJ statement");
+          throw bad("malformed line: " + quote_token(w[0]) + " is not an OBJ statement");
     }
   }
   // Positive indices may legally refer to vertices defined later in the file.

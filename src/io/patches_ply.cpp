@@ -21,7 +21,7 @@ void put(std::string& buf, T value) {
 
 }  // namespace
 
-void write_patches_ply(const std::string& path, const PatchSet& patches) {
+void write_patches_ply(const std::string& path, const PatchSet& patches, StagedFiles* staged) {
   std::size_t nv = 0, nt = 0;
   for (const Patch& p : patches.patches) nv += p.positions.size(), nt += p.triangles.size();
   std::string header =
@@ -52,14 +52,7 @@ void write_patches_ply(const std::string& path, const PatchSet& patches) {
     }
     base += p.positions.size();
   }
-  write_atomically(path, [&](const std::string& tmp) {
-    std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), &std::fclose);
-    if (!f) throw OutputError(path + ": cannot open for writing");
-    if (std::fwrite(header.data(), 1, header.size(), f.get()) != header.size() ||
-        std::fwrite(body.data(), 1, body.size(), f.get()) != body.size())
-      throw OutputError(path + ": write failed (disk full?)");
-    if (std::fclose(f.release()) != 0) throw OutputError(path + ": write failed (disk full?)");
-  });
+  write_text_atomically(path, header + body, staged);  // binary-safe: writes the bytes as they are
 }
 
 }  // namespace lapflow

@@ -16,7 +16,7 @@ std::string uv_mesh_mtl_path(const std::string& obj_path) {
 }
 
 void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const SurfaceAtlas& atlas,
-                       const UvMeshMaterial& material) {
+                       const UvMeshMaterial& material, StagedFiles* staged) {
   const std::size_t nt = mesh.triangle_count();
   if (atlas.corner_uv.size() != 3 * nt || atlas.chart_of_triangle.size() != nt)
     throw std::invalid_argument("write_uv_mesh_obj: the atlas was built for another mesh");
@@ -80,8 +80,8 @@ void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const S
     fmt::format_to(out, "f {0}/{1}/{0} {2}/{3}/{2} {4}/{5}/{4}\n", f[0] + 1, vt_of_corner[3 * t] + 1, f[1] + 1,
                    vt_of_corner[3 * t + 1] + 1, f[2] + 1, vt_of_corner[3 * t + 2] + 1);
   }
-  write_text_atomically(mtl_path, fmt::to_string(mtl));
-  write_text_atomically(obj_path, fmt::to_string(obj));
+  write_text_atomically(mtl_path, fmt::to_string(mtl), staged);
+  write_text_atomically(obj_path, fmt::to_string(obj), staged);
 }
 
 }  // namespace lapflow

@@ -167,6 +167,22 @@ TEST(BadInput, ObjOutOfRangeAndMalformedLines) {
   expect_input_error([&] { read_mesh(tmp / "bin.obj"); }, tmp / "bin.obj", {"line 2", "malformed line"});
 }
 
+TEST(BadInput, ObjHugeNumbersGiveAShortLineNamingTheFile) {
+  // A 1 MB number: out of range of a double, quoted in 40 characters, not in full.
+  TempDir tmp("bad");
+  test::write_bytes(tmp / "huge.obj", "v 0 0 0\nv 1 " + std::string(1 << 20, '9') + " 0\nv 0 1 0\nf 1 2 3\n");
+  std::string what = expect_input_error([&] { read_mesh(tmp / "huge.obj"); }, tmp / "huge.obj",
+                                        {"line 2", "malformed vertex 1", "'" + std::string(40, '9') + "...'",
+                                         "(1048576 characters)", "is out of range for a double"});
+  EXPECT_LT(what.size(), 300u);
+  // Garbage with raw bytes: escaped, and cut the same way.
+  test::write_bytes(tmp / "junk.obj", "v 0 0 0\nv 0 0 1.5\x01\xff" + std::string(100000, '5') + "\n");
+  what = expect_input_error([&] { read_mesh(tmp / "junk.obj"); }, tmp / "junk.obj",
+                            {"line 2", "malformed vertex 1", "'1.5\\x01\\xff555", "(100005 characters)", "is not a number"});
+  EXPECT_LT(what.size(), 300u);
+  EXPECT_EQ(what.find('\x01'), std::string::npos);
+}
+
 TEST(BadInput, MissingUnreadableAndUnknownFiles) {
   TempDir tmp("bad");
   expect_input_error([&] { read_mesh(tmp / "nothing.ply"); }, tmp / "nothing.ply", {"file not found"});

@@ -65,6 +65,12 @@ void resolve_bake_options(BakeOptions& options);
 /// Files per frame N (4 digits) in out_dir: NAME.N.obj + NAME.N.mtl,
 /// NAME.color.N.exr, NAME.disp.N.exr, NAME.aov.N.exr (with aov),
 /// NAME.patches.N.ply (with dump_patches); NAME.stats.jsonl for the sequence.
+/// A frame's files are renamed into place together, the OBJ last: frame N
+/// is complete when NAME.N.obj exists. First removes this bake's stale
+/// temporary files from out_dir. Throws InputError for bad input,
+/// OutputError naming the folder or file that cannot be written (earlier
+/// frames stay intact), and Interrupted when stop_signal() (interrupt.hpp)
+/// asks to stop: checked before each frame and before writing one.
 void bake(const BakeOptions& options, const std::function<void(const FrameStats&)>& on_frame = {});
 
 /// Peak resident memory of this process so far, in MiB.

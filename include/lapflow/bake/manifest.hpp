@@ -35,6 +35,11 @@ struct BakeManifest {
   std::string frame_file(const std::string& kind, int frame) const;
 };
 
+/// ECMAScript regexes matching the whole stem (the name before the last
+/// extension) of every file a bake named `name` writes: `NAME\.color\.[0-9]+`,
+/// `NAME\.[0-9]+`, `NAME\.stats`, ... For remove_stale_temporaries().
+std::vector<std::string> bake_file_stem_patterns(const std::string& name);
+
 /// Path of NAME.bake.json in `dir`.
 std::string bake_manifest_path(const std::string& dir, const std::string& name);
 

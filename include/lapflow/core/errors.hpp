@@ -1,6 +1,8 @@
 #pragma once
-/// \file errors.hpp Exceptions for bad input. Only the CLI catches them and
-/// turns them into exit code 2 (bad input) or 1 (anything else).
+/// \file errors.hpp Exceptions for bad input, output failures and stops.
+/// Only the CLI catches them and turns them into an exit code: 2 for bad
+/// input, usage and output problems, 128 + signal for a stop, 1 for anything
+/// else.
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -31,10 +33,26 @@ class UsageError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-/// Failure writing an output (disk full, permission): exit code 1.
+/// Failure writing an output (disk full, file too large, permission, --out
+/// not a folder): exit code 2. what() names the file or folder and the
+/// system's reason.
 class OutputError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+};
+
+/// A run that SIGINT or SIGTERM asked to stop, stopped between frames with
+/// every frame's files either all in place or all absent: exit code
+/// 128 + signal. what(): `stopped by SIGTERM; the last complete frame is 12`.
+class Interrupted : public std::runtime_error {
+ public:
+  Interrupted(int signal, std::optional<int> last_complete_frame);
+  int signal() const { return signal_; }
+  std::optional<int> last_complete_frame() const { return last_complete_frame_; }
+
+ private:
+  int signal_;
+  std::optional<int> last_complete_frame_;
 };
 
 }  // namespace lapflow

@@ -5,6 +5,8 @@
 
 namespace lapflow {
 
+class StagedFiles;  // lapflow/io/atomic_file.hpp
+
 /// Interleaved float image, row 0 at the top, linear values.
 struct Image {
   int width = 0, height = 0, channels = 0;
@@ -47,9 +49,11 @@ struct ExrOptions {
   ExrCompression compression = ExrCompression::Rle;
 };
 /// Writes an EXR with the given channel names (size == img.channels),
-/// atomically (temporary file, then rename). Throws OutputError.
+/// atomically (temporary file, then rename), or into the group `staged`.
+/// The header holds no date, time or host: the same image gives the same
+/// bytes. Throws OutputError.
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
-               const ExrOptions& options = {});
+               const ExrOptions& options = {}, StagedFiles* staged = nullptr);
 /// Writes a PNG (values clamped to [0,1], encoded to sRGB when `to_srgb`;
 /// alpha, the last of 2 or 4 channels, is never encoded), atomically.
 /// `bits` is 8 or 16 (16 for data maps: feature, displacement).

@@ -8,6 +8,8 @@
 
 namespace lapflow {
 
+class StagedFiles;  // lapflow/io/atomic_file.hpp
+
 /// What the MTL names. Texture paths are written as given (relative to the
 /// MTL's folder, as renderers resolve them); an empty path omits the line.
 struct UvMeshMaterial {
@@ -19,12 +21,13 @@ struct UvMeshMaterial {
 /// The MTL written beside an OBJ: the OBJ path with its extension replaced by `.mtl`.
 std::string uv_mesh_mtl_path(const std::string& obj_path);
 
-/// Writes `obj_path` and its MTL (uv_mesh_mtl_path), both atomically.
+/// Writes `obj_path` and its MTL (uv_mesh_mtl_path), both atomically, or
+/// into the group `staged` (which the caller commits).
 /// `v` lines are the source vertices in order (output vertex i is source
 /// vertex i, so provenance is the index); one `vt` per distinct (vertex,
 /// chart, uv) corner; `vn` per vertex (area-weighted); `f v/vt/vn` per
 /// triangle in source order. Throws OutputError when a file cannot be written.
 void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const SurfaceAtlas& atlas,
-                       const UvMeshMaterial& material);
+                       const UvMeshMaterial& material, StagedFiles* staged = nullptr);
 
 }  // namespace lapflow

@@ -13,6 +13,8 @@
 
 namespace lapflow {
 
+class StagedFiles;  // lapflow/io/atomic_file.hpp
+
 /// One texture patch: an open triangle mesh with its own topology, carrying
 /// rest uv coordinates into the exemplar ([0,1]^2, centre at (0.5, 0.5), uv
 /// distance 0.5 is about r on the surface).
@@ -189,7 +191,7 @@ void patch_weights(const TriMesh& surface, double radius, const WeightOptions& o
 void update_weights(const TriMesh& surface, double radius, const WeightOptions& options, PatchSet& patches);
 
 /// Writes all patches as one binary PLY with per-vertex `patch_id`, `u`, `v`,
-/// `w` and per-face `patch_id` (atomically).
-void write_patches_ply(const std::string& path, const PatchSet& patches);
+/// `w` and per-face `patch_id` (atomically, or into the group `staged`).
+void write_patches_ply(const std::string& path, const PatchSet& patches, StagedFiles* staged = nullptr);
 
 }  // namespace lapflow

@@ -1,0 +1,142 @@
+// Writing baked frames: the same inputs give the same bytes in every file;
+// a frame's files appear together; a stop between frames leaves whole frames
+// only; a bake's start removes the temporary files killed runs left.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/core/interrupt.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/io/mesh_io.hpp"
+
+using namespace lapflow;
+using lapflow::test::TempDir;
+namespace fs = std::filesystem;
+
+namespace {
+
+/// The demo's vortex, coarse, frames 1..n, as dir/m.%04d.ply.
+void write_demo_sequence(const std::string& dir, int n) {
+  DemoOptions demo;
+  demo.voxel_size = 1.0 / 40;
+  for (int f = 1; f <= n; ++f) write_ply(fmt::format("{}/m.{:04d}.ply", dir, f), demo_frame(demo, f));
+}
+
+BakeOptions small_bake(const std::string& meshes, const std::string& out) {
+  BakeOptions o = test::small_pebbles_bake(meshes, out);
+  o.atlas.resolution = 128;
+  o.dump_patches = true;  // every kind of frame file
+  resolve_bake_options(o);
+  return o;
+}
+
+std::vector<std::string> names_in(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::vector<std::string> temporaries_in(const std::string& dir) {
+  std::vector<std::string> t;
+  for (const std::string& n : names_in(dir))
+    if (n.find(".tmp") != std::string::npos) t.push_back(n);
+  return t;
+}
+
+/// NAME.stats.jsonl without what depends on the clock and the machine.
+std::vector<nlohmann::json> stats_without_timings(const std::string& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(test::read_bytes(path));
+  for (std::string line; std::getline(in, line);) {
+    nlohmann::json j = nlohmann::json::parse(line);
+    j.erase("seconds");
+    j.erase("peak_rss_mb");
+    lines.push_back(j);
+  }
+  return lines;
+}
+
+const char* const kFrameFiles[] = {"t.{:04d}.obj", "t.{:04d}.mtl", "t.color.{:04d}.exr", "t.disp.{:04d}.exr",
+                                   "t.aov.{:04d}.exr", "t.patches.{:04d}.ply"};
+
+}  // namespace
+
+// Two bakes of the same inputs (one on one thread writing in the
+// foreground, one on two threads writing in the background) give the same
+// bytes in every file, EXRs included: no date in their headers.
+TEST(BakeWriter, SameInputsGiveByteIdenticalFiles) {
+  TempDir meshes("bytes_in"), a("bytes_a"), b("bytes_b");
+  write_demo_sequence(meshes.str(), 3);
+  set_thread_count(1);
+  bake(small_bake(meshes.str(), a.str()));
+  set_thread_count(2);
+  BakeOptions background = small_bake(meshes.str(), b.str());
+  background.background_write = true;
+  bake(background);
+  set_thread_count(0);
+
+  const std::vector<std::string> files = names_in(a.str());
+  ASSERT_EQ(files, names_in(b.str()));
+  ASSERT_EQ(files.size(), 3 * std::size(kFrameFiles) + 2);  // + bake.json, stats.jsonl
+  for (const std::string& f : files) {
+    if (f == "t.stats.jsonl") continue;
+    const std::string bytes = test::read_bytes(a / f);
+    ASSERT_GT(bytes.size(), 0u) << f;
+    EXPECT_TRUE(bytes == test::read_bytes(b / f)) << f << " differs between two bakes of the same inputs";
+    if (f.ends_with(".exr")) {
+      EXPECT_EQ(bytes.find("capDate"), std::string::npos) << f << " carries a date";
+    }
+  }
+  // The stats differ only in the seconds and the memory.
+  EXPECT_EQ(stats_without_timings(a / "t.stats.jsonl"), stats_without_timings(b / "t.stats.jsonl"));
+}
+
+// A stop asked for while frame 3 computes (as SIGTERM does) abandons it:
+// frames 1-2 whole, no file of frame 3, no temporary file, the stop says
+// which frame was the last complete one.
+TEST(BakeWriter, AStopBetweenFramesLeavesOnlyWholeFrames) {
+  TempDir meshes("stop_in"), out("stop_out");
+  write_demo_sequence(meshes.str(), 4);
+  std::vector<int> written;
+  try {
+    bake(small_bake(meshes.str(), out.str()), [&](const FrameStats& s) {
+      written.push_back(s.frame);
+      if (s.frame == 2) request_stop(SIGTERM);
+    });
+    request_stop(0);
+    FAIL() << "the bake must stop";
+  } catch (const Interrupted& e) {
+    request_stop(0);
+    EXPECT_EQ(e.signal(), SIGTERM);
+    EXPECT_EQ(e.last_complete_frame(), 2);
+    EXPECT_NE(std::string(e.what()).find("the last complete frame is 2"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(written, (std::vector<int>{1, 2}));
+  for (int f = 1; f <= 4; ++f)
+    for (const char* kind : kFrameFiles)
+      EXPECT_EQ(fs::exists(out / fmt::format(fmt::runtime(kind), f)), f <= 2) << fmt::format(fmt::runtime(kind), f);
+  EXPECT_TRUE(temporaries_in(out.str()).empty());
+  EXPECT_EQ(stats_without_timings(out / "t.stats.jsonl").size(), 2u);
+}
+
+// A bake's start removes the temporary files a killed run of the same bake
+// left (a SIGKILL cannot be caught), and only those.
+TEST(BakeWriter, ABakeRemovesTheStaleTemporaryFilesOfItsOwnName) {
+  TempDir meshes("stale_in"), out("stale_out");
+  write_demo_sequence(meshes.str(), 1);
+  for (const char* n : {".t.color.0002.tmp4242_7.exr", ".t.0001.tmp4242_9.obj", ".t.stats.tmp4242_3.jsonl"})
+    test::write_bytes(out / n, std::string(1000, 'x'));
+  test::write_bytes(out / ".other.color.0001.tmp4242_7.exr", "another bake's");
+  bake(small_bake(meshes.str(), out.str()));
+  EXPECT_EQ(temporaries_in(out.str()), std::vector<std::string>{".other.color.0001.tmp4242_7.exr"});
+  for (const char* kind : kFrameFiles) EXPECT_TRUE(fs::exists(out / fmt::format(fmt::runtime(kind), 1))) << kind;
+}
