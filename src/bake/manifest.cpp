@@ -133,11 +133,19 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
       path = found.front();
     }
   }
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path.string(), "cannot open the bake manifest");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_bake_manifest(text.str(), path.string());
+}
+
+BakeManifest parse_bake_manifest(const std::string& text, const std::string& path_text) {
+  const fs::path path = path_text;
+  std::error_code ec;
   nlohmann::json j;
   try {
-    in >> j;
+    j = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
     throw InputError(path.string(), std::string("not valid JSON: ") + e.what());
   }

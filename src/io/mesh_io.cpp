@@ -8,7 +8,11 @@
 // failure names the file, the element and its index.
 #include "lapflow/io/mesh_io.hpp"
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
@@ -552,24 +556,47 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
 
 }  // namespace
 
-UvMesh read_uv_mesh(const std::string& path) {
-  const std::string ext = lower(fs::path(path).extension().string());
-  if (ext != ".obj") throw InputError(path, "a UV mesh must be an OBJ file (lapflow writes NAME.N.obj)");
+UvMesh read_uv_mesh_from_memory(const std::string& data, const std::string& name) {
   UvMesh out;
-  out.mesh = read_obj(path, load_file(path), &out.corner_uv);
+  out.mesh = read_obj(name, data, &out.corner_uv);
   return out;
 }
 
-TriMesh read_mesh(const std::string& path) {
+UvMesh read_uv_mesh(const std::string& path) {
   const std::string ext = lower(fs::path(path).extension().string());
-  const std::string data = load_file(path);
-  if (ext == ".ply") return read_ply(path, data);
-  if (ext == ".obj") return read_obj(path, data);
-  // Unknown extension: trust the content when it says PLY.
-  if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r'))
-    return read_ply(path, data);
-  throw InputError(path, "unknown mesh format '" + ext + "' (lapflow reads .ply and .obj)");
+  if (ext != ".obj") throw InputError(path, "a UV mesh must be an OBJ file (lapflow writes NAME.N.obj)");
+  return read_uv_mesh_from_memory(load_file(path), path);
 }
+
+void check_mesh_bounds(const TriMesh& mesh, const std::string& path) {
+  if (mesh.empty()) return;
+  const Box3 b = bounding_box(mesh);
+  const double reach = std::max({std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x),
+                                 std::abs(b.hi.y), std::abs(b.hi.z)});
+  if (!(reach <= kMaxMeshCoordinate))
+    throw InputError(path, fmt::format("mesh bounds {:.3g} m: are the units metres? (bounds ({:.3g}, {:.3g}, {:.3g}) - "
+                                       "({:.3g}, {:.3g}, {:.3g}); lapflow refuses coordinates beyond {:.0e} m)",
+                                       reach, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z, kMaxMeshCoordinate));
+}
+
+TriMesh read_mesh_from_memory(const std::string& data, const std::string& path) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  TriMesh mesh;
+  if (ext == ".ply") {
+    mesh = read_ply(path, data);
+  } else if (ext == ".obj") {
+    mesh = read_obj(path, data);
+  } else if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r')) {
+    // Unknown extension: trust the content when it says PLY.
+    mesh = read_ply(path, data);
+  } else {
+    throw InputError(path, "unknown mesh format '" + ext + "' (lapflow reads .ply and .obj)");
+  }
+  check_mesh_bounds(mesh, path);
+  return mesh;
+}
+
+TriMesh read_mesh(const std::string& path) { return read_mesh_from_memory(load_file(path), path); }
 
 void write_ply(const std::string& path, const TriMesh& m) {
   const bool vel = m.has_velocities();
