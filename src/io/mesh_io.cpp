@@ -207,6 +207,16 @@ class PlyData {
 
   double read(Scalar t) { return ascii_ ? read_ascii() : read_binary(t); }
 
+  /// A list's length: a whole number no larger than the bytes left (every
+  /// item takes at least one), else an InputError. A raw cast of an ASCII
+  /// length of 3e62 would be undefined.
+  uint64_t list_length(Scalar count_type) {
+    const double n = read(count_type);
+    if (!(n >= 0) || n != std::floor(n) || n > double(end_ - p_))
+      throw InputError(path_, where() + ": invalid list length " + std::to_string(n));
+    return uint64_t(n);
+  }
+
   void skip(Scalar t, uint64_t n) {
     if (ascii_) {
       for (uint64_t i = 0; i < n; ++i) read_ascii();
@@ -353,9 +363,7 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
         for (std::size_t k = 0; k < e.props.size(); ++k) {
           const PlyProperty& p = e.props[k];
           if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0) || n != std::floor(n)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else if (slot[k] >= 0) {
             v[slot[k]] = in.read(p.type);
           } else {
@@ -388,14 +396,13 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
         for (std::size_t k = 0; k < e.props.size(); ++k) {
           const PlyProperty& p = e.props[k];
           if (int(k) == list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 3))
-              throw InputError(path, in.where() + " has " + std::to_string(int64_t(n)) +
-                                         " vertices (a face needs at least 3)");
+            const uint64_t n = in.list_length(p.count_type);
+            if (n < 3)
+              throw InputError(path, in.where() + " has " + std::to_string(n) + " vertices (a face needs at least 3)");
             // One value at a time: a corrupt huge count hits the end of the
-            // data (truncated) before it can allocate anything.
+            // data (truncated) before it can allocate much.
             poly.clear();
-            for (double j = 0; j < n; ++j) {
+            for (uint64_t j = 0; j < n; ++j) {
               const double x = in.read(p.type);
               if (!(x >= 0 && x <= double(INT32_MAX)))
                 throw InputError(path, "face " + std::to_string(i) + ": vertex index " +
@@ -408,9 +415,7 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
               face_of_triangle.push_back(int32_t(i));
             }
           } else if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else {
             in.skip(p.type, 1);
           }
@@ -423,9 +428,7 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
         in.at(e.name, i, e.count);
         for (const PlyProperty& p : e.props) {
           if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else {
             in.skip(p.type, 1);
           }
