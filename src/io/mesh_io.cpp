@@ -423,7 +423,9 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
       }
     } else {
       // Elements lapflow does not use (edges, materials, a second vertex set):
-      // walk over them so the data after them stays aligned.
+      // walk over them so the data after them stays aligned. One with no
+      // property holds no data: a count of 2e14 must not be walked.
+      if (e.props.empty()) continue;
       for (uint64_t i = 0; i < e.count; ++i) {
         in.at(e.name, i, e.count);
         for (const PlyProperty& p : e.props) {
