@@ -45,8 +45,9 @@ void run_feature_map(FeatureMapCli& c) {
     throw UsageError("-o " + c.output + ": the output must end in .png, .exr, .tif or .tiff");
   // The header against the budget before any pixel is decoded: the decoded
   // float image plus the method's working images (blurred copies, gradient,
-  // distance grids in double, the output).
-  constexpr double kWorkBytesPerPixel = 96;
+  // distance grids in double, the output): 52 bytes a pixel in all on a
+  // 4096² RGB input (docs/robustness.md), with margin.
+  constexpr double kWorkBytesPerPixel = 64;
   const std::size_t budget = c.max_memory > 0 ? c.max_memory : default_memory_budget();
   const ImageHeader header = read_image_header(c.input);
   check_image_budget(c.input, header, 4.0 * header.channels + kWorkBytesPerPixel, budget);
@@ -113,7 +114,7 @@ void add_feature_map_command(CLI::App& app) {
   cmd->add_option("--compare", c.compare,
                   "A reference feature map: print the correlation of the result with it (on stdout)");
   add_max_memory_option(*cmd, c.max_memory,
-                        "An input whose header promises more pixels than fit (about 100 bytes a pixel) is refused "
+                        "An input whose header promises more pixels than fit (about 76 bytes a pixel for RGB) is refused "
                         "(exit 2) before it is decoded.");
   add_global_options(*cmd);
   cmd->callback([] { run_feature_map(c); });
