@@ -149,14 +149,18 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                  "a radius that needs more patches than --max-memory holds (or 2e7) is refused")
       ->capture_default_str()
       ->group("Patches");
-  cmd.add_option("--spacing", o.seeding.spacing, "Poisson-disk distance between seeds, in units of r")
+  cmd.add_option("--spacing", o.seeding.spacing,
+                 "Poisson-disk distance between seeds, in units of r (patches grow as 1/spacing^2: a spacing whose "
+                 "patches would not fit --max-memory is refused)")
       ->capture_default_str()
       ->group("Patches");
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
   add_remesher_option(cmd, o.patch.remesher)
       ->group("Patches");
-  cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
+  cmd.add_option("--remesh-edge", o.patch.remesh_edge,
+                 "Remeshing target edge length, in units of r (a patch's memory grows as 1/edge^2: an edge whose "
+                 "patches would not fit --max-memory is refused)")
       ->capture_default_str()
       ->group("Patches");
   cmd.add_option("--orientation", c.orientation,

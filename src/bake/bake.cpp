@@ -57,6 +57,8 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
   o.advect.dt = 1.0 / o.fps;
   o.patch.seed = o.seed;
   if (o.patch.radius < 0) throw UsageError("--radius must be positive");
+  if (!(o.seeding.spacing > 0)) throw UsageError("--spacing must be positive");
+  if (o.patch.remesh && !(o.patch.remesh_edge > 0)) throw UsageError("--remesh-edge must be positive");
   // The first frame's mesh and the exemplar's headers: the automatic values
   // and the memory estimate come from them, before anything large exists.
   const BakeInputSizes sizes = read_bake_input_sizes(o);

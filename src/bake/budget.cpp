@@ -116,15 +116,15 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
 
 BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSizes& s) {
   BakeMemoryEstimate e;
-  const double r = o.patch.radius, spacing = std::max(o.seeding.spacing, 1e-9);
+  const double r = o.patch.radius, spacing = o.seeding.spacing;
   const double d = spacing * r;
   // Areas grow with the sequence roughly as the files do.
   const double area = s.area * s.growth;
   e.covering_patches = r > 0 ? s.area / (std::numbers::pi * d * d) : 0;
   e.patches = kPopulationFactor * (r > 0 ? area / (std::numbers::pi * d * d) : 0);
-  double vertices_per_patch;
+  double& vertices_per_patch = e.vertices_per_patch;
   if (o.patch.remesh) {
-    const double edge = std::max(o.patch.remesh_edge, 1e-3);
+    const double edge = o.patch.remesh_edge;
     vertices_per_patch = kLatticeVertexFactor / (edge * edge);
   } else {
     // The fluid's own vertices within r.
@@ -164,8 +164,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
   if (s.displacement.width > 0)
     check_image_budget(o.exemplar_displacement, s.displacement, 4.0 * s.displacement.channels + 8, budget);
   if (e.covering_patches > kMaxPatches)
-    throw UsageError(fmt::format("--{} would need {:.2g} patches (more than {:.0e}): is the radius in metres?",
-                                 radius, e.covering_patches, kMaxPatches));
+    throw UsageError(fmt::format("--{} would need {:.2g} patches (more than {:.0e}){}", radius, e.covering_patches,
+                                 kMaxPatches,
+                                 o.seeding.spacing != 1 ? fmt::format(" at --spacing {:.3g}", o.seeding.spacing)
+                                                        : std::string(": is the radius in metres?")));
   if (e.total <= double(budget)) return e;
   // Name what takes most of it.
   struct Part {
@@ -174,8 +176,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
   };
   const Part parts[] = {
       {e.atlas, fmt::format("--resolution {}: {} of atlas buffers", o.atlas.resolution, format_bytes(e.atlas))},
-      {e.patch_bytes + e.seeding, fmt::format("--{} would need {:.2g} patches: {}", radius, e.patches,
-                                              format_bytes(e.patch_bytes + e.seeding))},
+      {e.patch_bytes + e.seeding,
+       fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {}",
+                   radius, e.patches, e.vertices_per_patch, o.seeding.spacing, o.patch.remesh_edge,
+                   format_bytes(e.patch_bytes + e.seeding))},
       {e.meshes, fmt::format("{}: {} triangles per frame: {} for the frames in flight", s.first_mesh, s.triangles,
                              format_bytes(e.meshes))},
       {e.exemplar, fmt::format("--exemplar {}: {}x{} pixels: {}", o.exemplar_color, s.color.width, s.color.height,

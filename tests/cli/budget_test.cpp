@@ -194,6 +194,17 @@ TEST(Budget, TinyRadiusIsRefusedWithThePatchCount) {
                              "--radius 0.005 --resolution 256 --max-memory 100M",
                              dir),
                  {"--max-memory 100 MiB", "--radius 0.005 m", "patches"});
+  // Patches of 5.7e8 vertices each.
+  expect_refused(run_limited("bake --mesh m.%04d.ply --allow-zero-velocity --exemplar pebbles --out out "
+                             "--remesh-edge 1e-4 --resolution 256",
+                             dir),
+                 {"patches of 5.67e+08 vertices", "--remesh-edge 0.0001"});
+  expect_refused(run_limited("bake --mesh m.%04d.ply --allow-zero-velocity --exemplar pebbles --out out "
+                             "--spacing 1e-5 --resolution 256",
+                             dir),
+                 {"--spacing", "patches"});
+  expect_refused(run_limited("bake --mesh m.%04d.ply --allow-zero-velocity --exemplar pebbles --out out --spacing 0", dir),
+                 {"--spacing must be positive"});
   EXPECT_FALSE(std::filesystem::exists(dir / "out"));
 }
 

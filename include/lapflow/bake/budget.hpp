@@ -33,6 +33,7 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& options);
 struct BakeMemoryEstimate {
   double covering_patches = 0;  ///< area / (pi (spacing r)^2): patches that cover the first frame once
   double patches = 0;           ///< the population the estimate provisions for
+  double vertices_per_patch = 0;
   double atlas = 0;             ///< per-texel buffers of the frames in flight
   double patch_bytes = 0;       ///< the patch population
   double seeding = 0;           ///< Poisson-disk candidates (first frame, and the per-frame fresh count)
