@@ -206,6 +206,9 @@ TEST(Budget, TinyRadiusIsRefusedWithThePatchCount) {
   expect_refused(run_limited("bake --mesh m.%04d.ply --allow-zero-velocity --exemplar pebbles --out out --spacing 0", dir),
                  {"--spacing must be positive"});
   EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+  // lapflow patches seeds with the same radius: the same refusal.
+  expect_refused(run_limited("patches --mesh m.%04d.ply --allow-zero-velocity --out out --radius 1e-6", dir),
+                 {"--radius 1e-06 m on 2.37 m² of surface", "7.5e+11 patches"});
 }
 
 TEST(Budget, ResolutionsOverTheBudgetAreRefusedBeforeAllocating) {
