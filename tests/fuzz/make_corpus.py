@@ -3,7 +3,9 @@
 made by hand in every layout the readers accept, plus the first faces of a
 shared frame cut down to a few kilobytes. Run from anywhere:
     python3 tests/fuzz/make_corpus.py [/work/shared/data]
-The result is committed; rerun it only to change the seeds."""
+The result is committed; rerun it only to change the seeds. The regress_*
+files beside them are inputs the fuzzers found (each a fixed bug, named in
+docs/robustness.md): they are kept by hand, not written here."""
 import json
 import os
 import struct
