@@ -8,6 +8,7 @@
 #include <regex>
 
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/memory.hpp"
 #include "lapflow/core/parallel.hpp"
 
 namespace lapflow::cli {
@@ -29,6 +30,15 @@ CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher) {
                   "grid and fast are the old names of lattice and isotropic")
       ->transform(CLI::CheckedTransformer(names).description(""))
       ->type_name("lattice|isotropic|cgal");
+}
+
+CLI::Option* add_max_memory_option(CLI::App& cmd, std::size_t& bytes, const std::string& what) {
+  return cmd
+      .add_option_function<std::string>(
+          "--max-memory", [&bytes](const std::string& text) { bytes = lapflow::parse_memory_size(text); },
+          fmt::format("Memory the command may use, e.g. 16G or 500M (default: 80% of physical memory, here {}). {}",
+                      lapflow::format_bytes(double(lapflow::default_memory_budget())), what))
+      ->type_name("SIZE");
 }
 
 void add_global_options(CLI::App& cmd) {

@@ -26,6 +26,10 @@ GlobalOptions& globals();
 /// Adds --threads, --seed and --quiet to a subcommand.
 void add_global_options(CLI::App& cmd);
 
+/// `--max-memory SIZE` (16G, 500M, bytes; default 80% of physical memory)
+/// into `bytes`, with `what` saying what the command refuses beyond it.
+CLI::Option* add_max_memory_option(CLI::App& cmd, std::size_t& bytes, const std::string& what);
+
 /// `--remesher lattice|isotropic|cgal` (the old names `grid` and `fast` are
 /// accepted too), shared by bake and patches.
 CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher);

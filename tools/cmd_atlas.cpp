@@ -8,7 +8,9 @@
 
 #include "cli_common.hpp"
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/bake/budget.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/memory.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/core/parallel.hpp"
@@ -20,6 +22,7 @@ namespace {
 struct AtlasCommand {
   std::string mesh, out, texels_png;
   AtlasOptions atlas;
+  std::size_t max_memory = 0;  ///< bytes; 0 = default_memory_budget()
   bool report = false, json = false, checker = false;
 };
 
@@ -57,6 +60,14 @@ void run(const AtlasCommand& o) {
   const auto start = std::chrono::steady_clock::now();
   const TriMesh mesh = read_mesh(o.mesh);
   const double read_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // Before the texel map exists: a resolution whose buffers do not fit is
+  // refused, never an allocation that fails half-way.
+  const std::size_t budget = o.max_memory > 0 ? o.max_memory : default_memory_budget();
+  const double needed = estimate_atlas_memory(mesh.triangle_count(), o.atlas.resolution, !o.texels_png.empty());
+  if (needed > double(budget))
+    throw UsageError(fmt::format("--resolution {}: the atlas of {} would need about {} of memory, more than "
+                                 "--max-memory {}",
+                                 o.atlas.resolution, o.mesh, format_bytes(needed), format_bytes(double(budget))));
   const SurfaceAtlas atlas = build_surface_atlas(mesh, o.atlas);
   const AtlasReport& r = atlas.report;
   if (r.packing_overflow) warn("{}: too many charts for a {}x{} atlas: packed without gutter", o.mesh, o.atlas.resolution, o.atlas.resolution);
@@ -129,7 +140,9 @@ void add_atlas_command(CLI::App& app) {
       "and seconds per stage. Works on any triangle mesh (PLY or OBJ), static ones included.");
   cmd->add_option("mesh", o->mesh, "Input mesh (PLY or OBJ)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--out", o->out, "Output OBJ; the MTL is written beside it with the extension .mtl")->required();
-  cmd->add_option("--resolution", o->atlas.resolution, "Atlas width = height in texels")
+  cmd->add_option("--resolution", o->atlas.resolution,
+                  "Atlas width = height in texels; refused (exit 2) before any texel is allocated when its "
+                  "buffers (about 18 bytes per texel, 39 with --texels) do not fit --max-memory")
       ->check(CLI::Range(16, 65536))
       ->capture_default_str();
   cmd->add_option("--gutter", o->atlas.gutter, "Empty texels kept around every chart")
@@ -143,6 +156,7 @@ void add_atlas_command(CLI::App& app) {
   cmd->add_flag("--json", o->json, "Print the figures as JSON on stdout");
   cmd->add_flag("--checker", o->checker, "Write <obj stem>.checker.png beside the OBJ and point the MTL at it");
   cmd->add_option("--texels", o->texels_png, "Write a PNG of the chart texels coloured by chart (a look at the packing)");
+  add_max_memory_option(*cmd, o->max_memory, "A larger atlas is refused (exit 2) before it is built.");
   add_global_options(*cmd);
   cmd->callback([o] { run(*o); });
 }

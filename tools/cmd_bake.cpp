@@ -6,6 +6,7 @@
 #include "cli_common.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
+#include "lapflow/core/memory.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/bake/bake.hpp"
 
@@ -18,12 +19,16 @@ void bake_with_progress(BakeOptions& o) {
   struct Restore {
     ~Restore() { restore_stop_handlers(); }
   } restore;  // `lapflow demo` goes on to render previews: Ctrl-C must stop it as usual
-  resolve_bake_options(o);
+  const BakeMemoryEstimate memory = resolve_bake_options(o);
 
   const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
   info("lapflow bake: {} frames {}-{} of {}", frames.size(), frames.front(), frames.back(), o.mesh_pattern);
   info("  exemplar {} | radius {:.4g} m | atlas {}x{} | seed {} | {} threads", o.exemplar_color, o.patch.radius,
        o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
+  info("  memory estimate {} (atlas {}, {:.0f} patches {}, meshes {}, exemplar {}) of --max-memory {}",
+       format_bytes(memory.total), format_bytes(memory.atlas), memory.patches,
+       format_bytes(memory.patch_bytes + memory.seeding), format_bytes(memory.meshes), format_bytes(memory.exemplar),
+       format_bytes(double(o.max_memory > 0 ? o.max_memory : default_memory_budget())));
   Progress progress("bake", frames.size());
   double seconds = 0;
   bake(o, [&](const FrameStats& s) {
@@ -153,17 +158,22 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->group("Output");
   cmd.add_option("--radius", o.patch.radius,
-                 "Patch radius r in scene units: the exemplar spans 2r on the surface (0 = about 1500 patches)")
+                 "Patch radius r in scene units: the exemplar spans 2r on the surface (0 = about 1500 patches); "
+                 "a radius that needs more patches than --max-memory holds (or 2e7) is refused")
       ->capture_default_str()
       ->group("Patches");
-  cmd.add_option("--spacing", o.seeding.spacing, "Poisson-disk distance between seeds, in units of r")
+  cmd.add_option("--spacing", o.seeding.spacing,
+                 "Poisson-disk distance between seeds, in units of r (patches grow as 1/spacing^2: a spacing whose "
+                 "patches would not fit --max-memory is refused)")
       ->capture_default_str()
       ->group("Patches");
   cmd.add_flag("--no-remesh", c.no_remesh, "Do not remesh new patches isotropically before flattening")
       ->group("Patches");
   add_remesher_option(cmd, o.patch.remesher)
       ->group("Patches");
-  cmd.add_option("--remesh-edge", o.patch.remesh_edge, "Remeshing target edge length, in units of r")
+  cmd.add_option("--remesh-edge", o.patch.remesh_edge,
+                 "Remeshing target edge length, in units of r (a patch's memory grows as 1/edge^2: an edge whose "
+                 "patches would not fit --max-memory is refused)")
       ->capture_default_str()
       ->group("Patches");
   cmd.add_option("--orientation", c.orientation,
@@ -203,10 +213,17 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->check(CLI::IsMember({"erosion", "blend", "advect"}))
       ->capture_default_str()
       ->group("Erosion");
-  cmd.add_option("--resolution", o.atlas.resolution, "Atlas width = height in texels (0 = from the exemplar's density)")
+  cmd.add_option("--resolution", o.atlas.resolution,
+                 "Atlas width = height in texels, 16-32768 (0 = from the exemplar's density, 512-4096); a "
+                 "resolution whose buffers do not fit --max-memory is refused before the bake starts")
       ->capture_default_str()
       ->group("Atlas");
   cmd.add_option("--gutter", o.atlas.gutter, "Empty texels around every chart")->capture_default_str()->group("Atlas");
+  add_max_memory_option(cmd, o.max_memory,
+                        "Before reading more than the first frame, the bake estimates its memory from the surface "
+                        "area, --radius, --resolution and the exemplar's size (docs/robustness.md) and refuses (exit "
+                        "2) what would not fit")
+      ->group("Limits");
 }
 
 }  // namespace lapflow::cli

@@ -5,7 +5,9 @@
 #include <filesystem>
 
 #include "cli_common.hpp"
+#include "lapflow/bake/budget.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/memory.hpp"
 #include "lapflow/addons/feature_map.hpp"
 #include "lapflow/io/image.hpp"
 
@@ -16,6 +18,7 @@ struct FeatureMapCli {
   std::string input, output, method = "distance", compare;
   FeatureMapOptions o;
   bool eight_bit = false;
+  std::size_t max_memory = 0;  ///< bytes; 0 = default_memory_budget()
 };
 
 std::string lower_extension(const std::string& path) {
@@ -40,7 +43,15 @@ void run_feature_map(FeatureMapCli& c) {
   const std::string ext = lower_extension(c.output);
   if (ext != ".png" && ext != ".exr" && ext != ".tif" && ext != ".tiff")
     throw UsageError("-o " + c.output + ": the output must end in .png, .exr, .tif or .tiff");
-  const Image color = read_image(c.input);
+  // The header against the budget before any pixel is decoded: the decoded
+  // float image plus the method's working images (blurred copies, gradient,
+  // distance grids in double, the output): 52 bytes a pixel in all on a
+  // 4096² RGB input (docs/robustness.md), with margin.
+  constexpr double kWorkBytesPerPixel = 64;
+  const std::size_t budget = c.max_memory > 0 ? c.max_memory : default_memory_budget();
+  const ImageHeader header = read_image_header(c.input);
+  check_image_budget(c.input, header, 4.0 * header.channels + kWorkBytesPerPixel, budget);
+  const Image color = read_image(c.input, ColorSpace::Auto, budget);
   const Image f = make_feature_map(color, c.o);
 
   if (ext == ".exr") {
@@ -102,6 +113,9 @@ void add_feature_map_command(CLI::App& app) {
   cmd->add_flag("--8bit", c.eight_bit, "Write 8-bit PNG/TIFF instead of 16-bit");
   cmd->add_option("--compare", c.compare,
                   "A reference feature map: print the correlation of the result with it (on stdout)");
+  add_max_memory_option(*cmd, c.max_memory,
+                        "An input whose header promises more pixels than fit (about 76 bytes a pixel for RGB) is refused "
+                        "(exit 2) before it is decoded.");
   add_global_options(*cmd);
   cmd->callback([] { run_feature_map(c); });
 }

@@ -11,6 +11,8 @@
 
 #include "cli_common.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/frame.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/patches/patches.hpp"
@@ -24,6 +26,7 @@ struct PatchesCommand {
   FrameSource source;  ///< meshes and velocity: the bake's rules and defaults
   std::string frames, out_dir, name, orientation = "random";
   double radius = 0, fps = 24, spacing = 1, delta_max = 3;
+  std::size_t max_memory = 0;  ///< bytes; 0 = default_memory_budget()
   bool remesh = true;
   Remesher remesher = PatchOptions{}.remesher;
 };
@@ -90,6 +93,22 @@ void run_patches(const PatchesCommand& c) {
   PatchSet set;
   Progress progress("patches", frames.size());
   std::unique_ptr<Frame> prev = load_frame(c.source, frames.front());
+  {
+    // The bake's memory model, patches and meshes only (no atlas, no
+    // exemplar), before the first seeding: a radius in the wrong unit is
+    // refused, never an allocation that fails.
+    BakeOptions budget;
+    budget.patch = po;
+    budget.seeding = so;
+    budget.atlas.resolution = 0;
+    budget.max_memory = c.max_memory;
+    BakeInputSizes sizes;
+    sizes.first_mesh = prev->path;
+    sizes.area = surface_area(prev->mesh);
+    sizes.triangles = prev->mesh.triangle_count();
+    sizes.vertices = prev->mesh.vertex_count();
+    check_bake_budget(budget, sizes);
+  }
   seed_patches(*prev->surface, prev->number, po, so, wo, set);
   write_patches_ply(out_path(prev->number), set);
   const std::size_t seeded = set.patches.size();
@@ -128,7 +147,10 @@ void add_patches_command(CLI::App& app) {
   cmd->add_option("--mesh", c->source.mesh_pattern, "Fluid mesh per frame: fluid.%04d.ply, fluid.####.ply, fluid.$F4.ply")
       ->required();
   cmd->add_option("--frames", c->frames, "Frame range A-B (default: every frame found on disk)");
-  cmd->add_option("--radius", c->radius, "Patch radius r in world units (the exemplar spans 2r)")->required();
+  cmd->add_option("--radius", c->radius,
+                  "Patch radius r in world units (the exemplar spans 2r); a radius whose patches would not fit "
+                  "--max-memory (or number more than 2e7) is refused")
+      ->required();
   cmd->add_option("--out", c->out_dir, "Output folder")->required();
   cmd->add_option("--name", c->name, "Output file prefix (default: from the mesh pattern)");
   cmd->add_option("--velocity-vdb", c->source.velocity_vdb_pattern,
@@ -153,6 +175,7 @@ void add_patches_command(CLI::App& app) {
   add_remesher_option(*cmd, c->remesher);
   cmd->add_option("--orientation", c->orientation, "Patch rotation: random, or world:x,y,z to align u with a direction")
       ->capture_default_str();
+  add_max_memory_option(*cmd, c->max_memory, "Patches that would not fit are refused (exit 2) before the first seeding.");
   add_global_options(*cmd);
   cmd->callback([c] { run_patches(*c); });
 }

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include "lapflow/core/errors.hpp"
 
@@ -55,9 +57,17 @@ void add_table(const toml::table& table, const std::string& file, const fs::path
 
 std::vector<std::string> scene_file_arguments(const std::string& path) {
   if (!fs::exists(path)) throw InputError(path, "scene file not found");
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (!in) throw InputError(path, "cannot read the scene file");
+  return scene_text_arguments(text.str(), path);
+}
+
+std::vector<std::string> scene_text_arguments(const std::string& text, const std::string& path) {
   toml::table table;
   try {
-    table = toml::parse_file(path);
+    table = toml::parse(text, path);
   } catch (const toml::parse_error& e) {
     throw InputError(path, "line " + std::to_string(e.source().begin.line) + ": " + std::string(e.description()));
   }

@@ -16,6 +16,9 @@ bool is_path_option(const std::string& key);
 /// Throws InputError naming the file and the key for a malformed file or a
 /// value that is not a string, number or boolean.
 std::vector<std::string> scene_file_arguments(const std::string& path);
+/// The same for a scene file's text already in memory (`path` names it in
+/// errors and gives the folder relative paths start from): the fuzzers' entry.
+std::vector<std::string> scene_text_arguments(const std::string& text, const std::string& path);
 
 /// Replaces, in `args` (argv without the program name), every positional
 /// argument ending in `.toml` that follows the command by the file's options,

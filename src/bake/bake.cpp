@@ -14,6 +14,7 @@
 
 #include "bake/read_ahead.hpp"
 #include "bake/writer.hpp"
+#include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
@@ -53,7 +54,7 @@ FrameSource frame_source(const BakeOptions& o) {
   return source;
 }
 
-void resolve_bake_options(BakeOptions& o) {
+BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
   if (o.mesh_pattern.empty()) throw UsageError("--mesh is required (a per-frame PLY/OBJ pattern)");
   if (o.out_dir.empty()) throw UsageError("--out is required");
   if (o.exemplar_color.empty()) throw UsageError("--exemplar is required");
@@ -61,37 +62,31 @@ void resolve_bake_options(BakeOptions& o) {
   o.advect.dt = 1.0 / o.fps;
   o.patch.seed = o.seed;
   if (o.patch.radius < 0) throw UsageError("--radius must be positive");
-  if (o.patch.radius == 0 || o.atlas.resolution == 0) {
-    // Automatic values come from the first frame's surface and the exemplar.
-    const FramePattern meshes(o.mesh_pattern);
-    const std::vector<int> frames = resolve_frames(meshes, o.frames);
-    TriMesh first;
-    try {
-      first = read_mesh(meshes.path(frames.front()));
-    } catch (const InputError& e) {
-      throw e.with_frame(frames.front());
-    }
-    const double area = surface_area(first);
-    if (o.patch.radius == 0) {
-      // About 1500 patches on the first frame: small enough to follow the flow,
-      // large enough that each shows the exemplar's features.
-      o.patch.radius = area > 0 ? std::sqrt(area / 1500.0) : 0.05;
-    }
-    if (o.atlas.resolution == 0) {
-      // One atlas texel per exemplar texel: the exemplar spans 2r over its
-      // width; charts fill about 65% of the atlas.
-      const Image probe = read_image(o.exemplar_color);
-      const double texel = 2 * o.patch.radius / std::max(1, probe.width);
-      const double n = std::sqrt(std::max(area, 1e-12) / 0.65) / texel;
-      o.atlas.resolution = int(std::clamp(std::ceil(n / 256.0) * 256.0, 512.0, 4096.0));
-    }
+  if (!(o.seeding.spacing > 0)) throw UsageError("--spacing must be positive");
+  if (o.patch.remesh && !(o.patch.remesh_edge > 0)) throw UsageError("--remesh-edge must be positive");
+  // The first frame's mesh and the exemplar's headers: the automatic values
+  // and the memory estimate come from them, before anything large exists.
+  const BakeInputSizes sizes = read_bake_input_sizes(o);
+  if (o.patch.radius == 0) {
+    // About 1500 patches on the first frame: small enough to follow the flow,
+    // large enough that each shows the exemplar's features.
+    o.patch.radius = sizes.area > 0 ? std::sqrt(sizes.area / 1500.0) : 0.05;
+  }
+  if (o.atlas.resolution == 0) {
+    // One atlas texel per exemplar texel: the exemplar spans 2r over its
+    // width; charts fill about 65% of the atlas.
+    const double texel = 2 * o.patch.radius / std::max(1, sizes.color.width);
+    const double n = std::sqrt(std::max(sizes.area, 1e-12) / 0.65) / texel;
+    o.atlas.resolution = int(std::clamp(std::ceil(n / 256.0) * 256.0, 512.0, 4096.0));
   }
   if (o.atlas.resolution < 16 || o.atlas.resolution > 32768)
     throw UsageError("--resolution must be between 16 and 32768 texels");
+  const BakeMemoryEstimate estimate = check_bake_budget(o, sizes);
   o.raster.radius = o.patch.radius;
   o.raster.aov = o.aov;
   o.raster.gutter = o.atlas.gutter;
   o.weights.keep_at_rest = o.raster.hold;
+  return estimate;
 }
 
 namespace {

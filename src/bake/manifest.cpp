@@ -4,9 +4,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string_view>
+#include <utility>
 
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/errors.hpp"
@@ -21,6 +23,24 @@ std::string absolute_or_empty(const std::string& p) {
   std::error_code ec;
   const fs::path a = fs::absolute(p, ec);
   return ec ? p : a.lexically_normal().string();
+}
+
+// A field that must be a whole number of type T: nlohmann's get<int>() of
+// 1e30 converts out of range (undefined behaviour) and of 2.5 truncates.
+template <typename T>
+T whole_number(const nlohmann::json& v, const std::string& key, const std::string& path) {
+  if (v.is_number_unsigned()) {
+    if (const uint64_t u = v.get<uint64_t>(); std::in_range<T>(u)) return T(u);
+  } else if (v.is_number_integer()) {
+    if (const int64_t i = v.get<int64_t>(); std::in_range<T>(i)) return T(i);
+  }
+  throw InputError(path, "'" + key + "' must be a whole number from " + std::to_string(std::numeric_limits<T>::min()) +
+                             " to " + std::to_string(std::numeric_limits<T>::max()) + ", got " + v.dump().substr(0, 40));
+}
+
+template <typename T>
+T whole_number(const nlohmann::json& j, const std::string& key, T fallback, const std::string& path) {
+  return j.contains(key) ? whole_number<T>(j.at(key), key, path) : fallback;
 }
 
 }  // namespace
@@ -144,23 +164,33 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
       path = found.front();
     }
   }
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path.string(), "cannot open the bake manifest");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_bake_manifest(text.str(), path.string());
+}
+
+BakeManifest parse_bake_manifest(const std::string& text, const std::string& path_text) {
+  const fs::path path = path_text;
+  std::error_code ec;
   nlohmann::json j;
   try {
-    in >> j;
+    j = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
     throw InputError(path.string(), std::string("not valid JSON: ") + e.what());
   }
   BakeManifest m;
   try {
     if (!j.contains("lapflow_bake")) throw InputError(path.string(), "not a lapflow bake manifest (no 'lapflow_bake')");
-    m.version = j.at("lapflow_bake").get<int>();
+    m.version = whole_number<int>(j.at("lapflow_bake"), "lapflow_bake", path.string());
     m.name = j.at("name").get<std::string>();
     m.mesh_pattern = j.value("mesh", "");
     m.velocity_vdb_pattern = j.value("velocity_vdb", "");
     m.velocity_grid = j.value("velocity_grid", "");
-    m.frames = j.at("frames").get<std::vector<int>>();
+    const nlohmann::json& frames = j.at("frames");
+    if (!frames.is_array()) throw InputError(path.string(), "'frames' must be an array of frame numbers");
+    for (const nlohmann::json& f : frames) m.frames.push_back(whole_number<int>(f, "frames", path.string()));
     m.fps = j.value("fps", 24.0);
     m.min_speed = j.value("min_speed", 0.0);
     m.allow_zero_velocity = j.value("allow_zero_velocity", false);
@@ -178,8 +208,8 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
     m.small_hole = j.value("small_hole", 0.0);
     m.merge = j.value("merge", 0.0);
     m.delta_max = j.value("delta_max", 0.0);
-    m.resolution = j.value("resolution", 0);
-    m.seed = j.value("seed", uint64_t(0));
+    m.resolution = whole_number<int>(j, "resolution", 0, path.string());
+    m.seed = whole_number<uint64_t>(j, "seed", 0, path.string());
     m.aov = j.value("aov", false);
     m.dump_patches = j.value("dump_patches", false);
   } catch (const InputError&) {

@@ -13,8 +13,11 @@
 #include <filesystem>
 #include <memory>
 
+#include <fmt/format.h>
+
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/memory.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/core/parallel.hpp"
 
@@ -164,7 +167,11 @@ std::vector<uint16_t> to_half(const std::vector<float>& in) {
 
 }  // namespace
 
-Image read_image(const std::string& path, ColorSpace space) {
+namespace {
+
+// Opens an image for reading its header (no pixel is decoded yet) and checks
+// that it has a plain 2D size.
+std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw InputError(path, "cannot read image: file does not exist");
   // Keep colour and alpha as stored (no premultiplication of PNG/TIFF
@@ -173,10 +180,34 @@ Image read_image(const std::string& path, ColorSpace space) {
   config.attribute("oiio:UnassociatedAlpha", 1);
   auto in = OIIO::ImageInput::open(path, &config);
   if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
-  const OIIO::ImageSpec spec = in->spec();
+  const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw InputError(path, "image has no pixels");
   if (spec.depth > 1) throw InputError(path, "volume images are not supported");
+  return in;
+}
+
+}  // namespace
+
+ImageHeader read_image_header(const std::string& path) {
+  const auto in = open_image(path);
+  const OIIO::ImageSpec& spec = in->spec();
+  return {spec.width, spec.height, spec.nchannels};
+}
+
+Image read_image(const std::string& path, ColorSpace space, std::size_t max_bytes) {
+  auto in = open_image(path);
+  const OIIO::ImageSpec spec = in->spec();
+  // Before any pixel is decoded: a corrupt or hostile header (a 1 KB PNG
+  // that claims 100000x100000) is refused, never an allocation that fails.
+  const ImageHeader header{spec.width, spec.height, spec.nchannels};
+  const std::size_t limit = max_bytes > 0 ? max_bytes : physical_memory();
+  if (limit > 0 && header.decoded_bytes() > double(limit))
+    throw InputError(path, fmt::format("the header says {}x{} pixels x {} channels: decoding needs {}, more than {}",
+                                       spec.width, spec.height, spec.nchannels,
+                                       format_bytes(header.decoded_bytes()),
+                                       max_bytes > 0 ? "the memory budget (--max-memory) of " + format_bytes(double(limit))
+                                                     : "this machine's " + format_bytes(double(limit))));
   Image img(spec.width, spec.height, spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
     throw InputError(path, "cannot read image: " + one_line(in->geterror()));

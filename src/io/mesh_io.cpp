@@ -8,7 +8,11 @@
 // failure names the file, the element and its index.
 #include "lapflow/io/mesh_io.hpp"
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
@@ -234,6 +238,16 @@ class PlyData {
 
   double read(Scalar t) { return ascii_ ? read_ascii() : read_binary(t); }
 
+  /// A list's length: a whole number no larger than the bytes left (every
+  /// item takes at least one), else an InputError. A raw cast of an ASCII
+  /// length of 3e62 would be undefined.
+  uint64_t list_length(Scalar count_type) {
+    const double n = read(count_type);
+    if (!(n >= 0) || n != std::floor(n) || n > double(end_ - p_))
+      throw InputError(path_, where() + ": invalid list length " + std::to_string(n));
+    return uint64_t(n);
+  }
+
   void skip(Scalar t, uint64_t n) {
     if (ascii_) {
       for (uint64_t i = 0; i < n; ++i) read_ascii();
@@ -380,9 +394,7 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
         for (std::size_t k = 0; k < e.props.size(); ++k) {
           const PlyProperty& p = e.props[k];
           if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0) || n != std::floor(n)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else if (slot[k] >= 0) {
             v[slot[k]] = in.read(p.type);
           } else {
@@ -415,14 +427,13 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
         for (std::size_t k = 0; k < e.props.size(); ++k) {
           const PlyProperty& p = e.props[k];
           if (int(k) == list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 3))
-              throw InputError(path, in.where() + " has " + std::to_string(int64_t(n)) +
-                                         " vertices (a face needs at least 3)");
+            const uint64_t n = in.list_length(p.count_type);
+            if (n < 3)
+              throw InputError(path, in.where() + " has " + std::to_string(n) + " vertices (a face needs at least 3)");
             // One value at a time: a corrupt huge count hits the end of the
-            // data (truncated) before it can allocate anything.
+            // data (truncated) before it can allocate much.
             poly.clear();
-            for (double j = 0; j < n; ++j) {
+            for (uint64_t j = 0; j < n; ++j) {
               const double x = in.read(p.type);
               if (!(x >= 0 && x <= double(INT32_MAX)))
                 throw InputError(path, "face " + std::to_string(i) + ": vertex index " +
@@ -435,9 +446,7 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
               face_of_triangle.push_back(int32_t(i));
             }
           } else if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else {
             in.skip(p.type, 1);
           }
@@ -445,14 +454,14 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
       }
     } else {
       // Elements lapflow does not use (edges, materials, a second vertex set):
-      // walk over them so the data after them stays aligned.
+      // walk over them so the data after them stays aligned. One with no
+      // property holds no data: a count of 2e14 must not be walked.
+      if (e.props.empty()) continue;
       for (uint64_t i = 0; i < e.count; ++i) {
         in.at(e.name, i, e.count);
         for (const PlyProperty& p : e.props) {
           if (p.is_list) {
-            const double n = in.read(p.count_type);
-            if (!(n >= 0)) throw InputError(path, in.where() + ": invalid list length");
-            in.skip(p.type, uint64_t(n));
+            in.skip(p.type, in.list_length(p.count_type));
           } else {
             in.skip(p.type, 1);
           }
@@ -584,24 +593,47 @@ TriMesh read_obj(const std::string& path, const std::string& data, std::vector<V
 
 }  // namespace
 
-UvMesh read_uv_mesh(const std::string& path) {
-  const std::string ext = lower(fs::path(path).extension().string());
-  if (ext != ".obj") throw InputError(path, "a UV mesh must be an OBJ file (lapflow writes NAME.N.obj)");
+UvMesh read_uv_mesh_from_memory(const std::string& data, const std::string& name) {
   UvMesh out;
-  out.mesh = read_obj(path, load_file(path), &out.corner_uv);
+  out.mesh = read_obj(name, data, &out.corner_uv);
   return out;
 }
 
-TriMesh read_mesh(const std::string& path) {
+UvMesh read_uv_mesh(const std::string& path) {
   const std::string ext = lower(fs::path(path).extension().string());
-  const std::string data = load_file(path);
-  if (ext == ".ply") return read_ply(path, data);
-  if (ext == ".obj") return read_obj(path, data);
-  // Unknown extension: trust the content when it says PLY.
-  if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r'))
-    return read_ply(path, data);
-  throw InputError(path, "unknown mesh format '" + ext + "' (lapflow reads .ply and .obj)");
+  if (ext != ".obj") throw InputError(path, "a UV mesh must be an OBJ file (lapflow writes NAME.N.obj)");
+  return read_uv_mesh_from_memory(load_file(path), path);
 }
+
+void check_mesh_bounds(const TriMesh& mesh, const std::string& path) {
+  if (mesh.empty()) return;
+  const Box3 b = bounding_box(mesh);
+  const double reach = std::max({std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x),
+                                 std::abs(b.hi.y), std::abs(b.hi.z)});
+  if (!(reach <= kMaxMeshCoordinate))
+    throw InputError(path, fmt::format("mesh bounds {:.3g} m: are the units metres? (bounds ({:.3g}, {:.3g}, {:.3g}) - "
+                                       "({:.3g}, {:.3g}, {:.3g}); lapflow refuses coordinates beyond {:.0e} m)",
+                                       reach, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z, kMaxMeshCoordinate));
+}
+
+TriMesh read_mesh_from_memory(const std::string& data, const std::string& path) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  TriMesh mesh;
+  if (ext == ".ply") {
+    mesh = read_ply(path, data);
+  } else if (ext == ".obj") {
+    mesh = read_obj(path, data);
+  } else if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r')) {
+    // Unknown extension: trust the content when it says PLY.
+    mesh = read_ply(path, data);
+  } else {
+    throw InputError(path, "unknown mesh format '" + ext + "' (lapflow reads .ply and .obj)");
+  }
+  check_mesh_bounds(mesh, path);
+  return mesh;
+}
+
+TriMesh read_mesh(const std::string& path) { return read_mesh_from_memory(load_file(path), path); }
 
 void write_ply(const std::string& path, const TriMesh& m) {
   const bool vel = m.has_velocities();

@@ -61,5 +61,30 @@ TEST(BakeManifest, ErrorsNameTheFile) {
   EXPECT_THROW(read_bake_manifest(dir.str(), "c"), InputError);      // named one missing
 }
 
+TEST(BakeManifest, NumbersOutOfRangeAreAnInputErrorNotUndefinedBehaviour) {
+  // Found by fuzz_manifest (tests/fuzz/corpus/manifest/regress_seed_beyond_uint64.bake.json):
+  // a seed of 1.8e19 written as a float was converted to uint64_t unchecked.
+  const std::string head = R"({"lapflow_bake": 1, "name": "m", "frames": [1, 2])";
+  for (const char* field : {R"("seed": 18446744147419103230.0)", R"("seed": -1)", R"("resolution": 2.5)",
+                                   R"("resolution": 1e30)", R"("lapflow_bake": 1e300)"}) {
+    try {
+      parse_bake_manifest(head + ", " + std::string(field) + "}", "m.bake.json");
+      ADD_FAILURE() << field << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "m.bake.json");
+      EXPECT_NE(std::string(e.what()).find("whole number"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(parse_bake_manifest(R"({"lapflow_bake": 1, "name": "m", "frames": [1, 3e9]})", "m.bake.json"),
+               InputError);
+  EXPECT_THROW(parse_bake_manifest(R"({"lapflow_bake": 1, "name": "m", "frames": 7})", "m.bake.json"), InputError);
+  // The largest seed still reads back exactly.
+  const BakeManifest m =
+      parse_bake_manifest(head + R"(, "seed": 18446744073709551615, "resolution": 4096})", "m.bake.json");
+  EXPECT_EQ(m.seed, 18446744073709551615u);
+  EXPECT_EQ(m.resolution, 4096);
+  EXPECT_EQ(m.frames, (std::vector<int>{1, 2}));
+}
+
 }  // namespace
 }  // namespace lapflow

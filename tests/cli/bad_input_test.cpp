@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -285,4 +286,39 @@ TEST(BadInput, RandomCorruptionsEitherReadOrThrowInputError) {
   }
   EXPECT_GT(errors, 100);
   EXPECT_GT(reads, 3);
+}
+
+TEST(BadInput, AsciiPlyListLengthsMustBeWholeNumbersTheDataCanHold) {
+  // Found by fuzz_ply (tests/fuzz/corpus/ply/regress_ascii_list_length_3e62.ply): an
+  // ASCII list length of 3e62 was cast to an integer unchecked.
+  TempDir tmp("bad");
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n";
+  for (const char* face : {"3e62 0 1 2\n", "3.5 0 1 2\n", "-1 0 1 2\n", "9999 0 1 2\n"}) {
+    test::write_bytes(tmp / "list.ply", head + std::string(face));
+    expect_input_error([&] { read_mesh(tmp / "list.ply"); }, tmp / "list.ply", {"face 0", "invalid list length"});
+  }
+  // The same in a property lapflow skips.
+  const std::string skipped =
+      "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+      "property list uchar float extra\nend_header\n0 0 0 3e62 1\n";
+  test::write_bytes(tmp / "skip.ply", skipped);
+  expect_input_error([&] { read_mesh(tmp / "skip.ply"); }, tmp / "skip.ply", {"vertex 0", "invalid list length"});
+  test::write_bytes(tmp / "ok.ply", head + "3 0 1 2\n");
+  EXPECT_EQ(read_mesh(tmp / "ok.ply").triangle_count(), 1u);
+}
+
+TEST(BadInput, AnElementWithNoPropertiesAndAHugeCountReadsAtOnce) {
+  // Found by fuzz_ply (tests/fuzz/corpus/ply/regress_empty_element_2e14.ply): an
+  // unused element with no property and a count of 2e14 was walked instance by
+  // instance, a hang of hours.
+  TempDir tmp("bad");
+  test::write_bytes(tmp / "empty.ply",
+                    "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                    "property float z\nelement junk 213333333333333\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(read_mesh(tmp / "empty.ply").triangle_count(), 1u);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }

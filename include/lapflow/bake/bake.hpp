@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/frame.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
@@ -44,6 +45,10 @@ struct BakeOptions {
   /// Write each frame's files on another thread while the next frame
   /// computes: one more frame of images in memory.
   bool background_write = false;
+  /// Bytes the bake may use: resolve_bake_options refuses options and
+  /// inputs whose estimate (bake/budget.hpp, docs/robustness.md) exceeds it.
+  /// 0 = 80% of physical memory.
+  std::size_t max_memory = 0;
   // Stages
   uint64_t seed = 1;
   PatchOptions patch;                     ///< patch.radius = r in metres (0 = automatic)
@@ -58,8 +63,10 @@ struct BakeOptions {
 FrameSource frame_source(const BakeOptions& options);
 
 /// Fills automatic values (radius, resolution) from the first frame and the
-/// exemplar, and checks every option. Throws UsageError / InputError.
-void resolve_bake_options(BakeOptions& options);
+/// exemplar's header, checks every option, and checks the memory the bake
+/// will need against max_memory before anything large is allocated
+/// (check_bake_budget). Returns that estimate. Throws UsageError / InputError.
+BakeMemoryEstimate resolve_bake_options(BakeOptions& options);
 
 /// Bakes every frame; `on_frame` is called after each frame is written.
 /// Files per frame N (4 digits) in out_dir: NAME.N.obj + NAME.N.mtl,

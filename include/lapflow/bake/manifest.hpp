@@ -51,6 +51,9 @@ void write_bake_manifest(const BakeManifest& manifest, const std::string& path);
 /// (`name` picks one when there are several). Throws InputError naming the
 /// file and what is wrong.
 BakeManifest read_bake_manifest(const std::string& path, const std::string& name = "");
+/// The manifest in `text` (the JSON of NAME.bake.json; `path` names it in
+/// errors and gives BakeManifest::dir). Throws InputError. The fuzzers' entry.
+BakeManifest parse_bake_manifest(const std::string& text, const std::string& path);
 
 /// The name of a RasterMode as the command line spells it, and back (throws UsageError).
 std::string raster_mode_name(RasterMode mode);

@@ -1,5 +1,6 @@
 #pragma once
 /// \file image.hpp Float images, exemplars and EXR/PNG writing (OIIO behind it).
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -22,12 +23,25 @@ struct Image {
 
 enum class ColorSpace { Auto, sRGB, Linear };
 
+/// What an image file's header says, read without decoding any pixel.
+struct ImageHeader {
+  int width = 0, height = 0, channels = 0;
+  /// Bytes of the decoded image (float per channel), what read_image allocates.
+  double decoded_bytes() const { return double(width) * double(height) * double(channels) * 4.0; }
+};
+/// Reads the header only (OIIO opens the file without reading its pixels).
+/// Throws InputError for an unreadable file or an image with no pixels.
+ImageHeader read_image_header(const std::string& path);
+
 /// Reads any image OIIO can (PNG, JPEG, TIFF, EXR; 8/16/32 bit) into linear
 /// float. With Auto, 8/16-bit integer files (unless tagged linear, as
 /// write_png(to_srgb = false) tags them) and files tagged sRGB are decoded
 /// from sRGB; float files are taken as linear; alpha is never decoded. Data maps (feature, height)
-/// should be read with ColorSpace::Linear. Throws InputError.
-Image read_image(const std::string& path, ColorSpace space = ColorSpace::Auto);
+/// should be read with ColorSpace::Linear. The header is checked before any
+/// pixel is decoded: an image whose float pixels would take more than
+/// `max_bytes` (0 = this machine's physical memory) is an InputError naming
+/// the file and its size. Throws InputError.
+Image read_image(const std::string& path, ColorSpace space = ColorSpace::Auto, std::size_t max_bytes = 0);
 
 /// Resamples to a new size (bilinear, box-filtered when shrinking; separable,
 /// so each axis is treated on its own). Deterministic for any thread count.

@@ -23,9 +23,26 @@ UvMesh read_uv_mesh(const std::string& path);
 /// triangulated (fan). Per-vertex velocity is read from PLY properties
 /// `vx vy vz`, `velocity_x/_y/_z` or `v_x/_y/_z` (float or double).
 /// Throws InputError naming the file and the offending element for a missing,
-/// truncated or malformed file, an index out of range, or a non-finite
-/// position or velocity. An empty mesh (no triangles) is legal.
+/// truncated or malformed file, an index out of range, a non-finite
+/// position or velocity, or bounds beyond kMaxMeshCoordinate (a corrupt
+/// file's 3e38, or a mesh not in metres). An empty mesh (no triangles) is legal.
 TriMesh read_mesh(const std::string& path);
+
+/// read_mesh on bytes already in memory: `name` gives the format (its
+/// extension, else PLY when the bytes start with the PLY magic) and names the
+/// input in errors. The readers' entry point for the fuzzers (tests/fuzz).
+TriMesh read_mesh_from_memory(const std::string& data, const std::string& name);
+/// read_uv_mesh on an OBJ already in memory, `name` naming it in errors.
+UvMesh read_uv_mesh_from_memory(const std::string& data, const std::string& name);
+
+/// Largest coordinate (metres from the origin) of a vertex a triangle uses
+/// that read_mesh accepts: 1000 km. No liquid simulation is that large, and
+/// every size lapflow derives (radius, patch count, atlas density) would be
+/// absurd.
+inline constexpr double kMaxMeshCoordinate = 1e6;
+/// Throws InputError naming `path` when a vertex of a triangle of `mesh`
+/// lies farther than kMaxMeshCoordinate from the origin on any axis.
+void check_mesh_bounds(const TriMesh& mesh, const std::string& path);
 
 /// Writes a mesh as binary little-endian PLY with float x y z and, when the
 /// mesh has velocities, float vx vy vz (the layout of ../shared/data).

@@ -1,0 +1,212 @@
+// The memory a bake will need, decided before anything large is allocated.
+// docs/robustness.md has the model, where each constant comes from and the
+// measurements that check it.
+#include "lapflow/bake/budget.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/core/errors.hpp"
+#include "lapflow/core/memory.hpp"
+#include "lapflow/io/mesh_io.hpp"
+
+namespace lapflow {
+namespace fs = std::filesystem;
+namespace {
+
+// Measured peaks are in docs/robustness.md; the constants come from what the
+// code allocates and the measurement checks them.
+// ---- per atlas texel (N^2 of them) ----------------------------------------
+// The raster's texel index (int32), the colour (RGBA float) and displacement
+// (float) images, and their half copies while the EXRs are written (freed
+// blocks stay in the heap for reuse, keep_freed_memory_for_reuse, so the
+// write phase's buffers add to the raster's in the peak).
+constexpr double kAtlasTexelBytes = 4 + 16 + 4 + 8 + 2;
+// --aov: patch_id u v w as float.
+constexpr double kAovTexelBytes = 16;
+// ---- per chart texel (a share kUtilization of the atlas) --------------------
+// The texel map (texel, triangle, two barycentrics) of this frame and of the
+// next one, read ahead (2 x 16); the raster's keys (8), flags (1) and hole
+// labels (4).
+constexpr double kChartTexelBytes = 2 * 16 + 8 + 1 + 4;
+// Blend mode's fixed-point sums (5 x 8) and best weights (8).
+constexpr double kBlendChartTexelBytes = 48;
+// Chart texels / atlas texels: the packer reaches 0.62-0.76 on the shared
+// scenes; provision for the high end.
+constexpr double kUtilization = 0.75;
+// ---- the fluid meshes --------------------------------------------------------
+// Per fluid triangle of a frame in flight: the mesh (positions, velocities,
+// triangles), Embree's BVH, the velocity band, the atlas's per-triangle
+// tables (charts, LSCM, corner uv) and the raster's (normals, centroids,
+// vertex-triangle lists, seams). Measured: splash against dam_break at the
+// same resolution, about 1000 bytes per triangle for the three frames.
+constexpr double kTriangleBytes = 400;
+// Frames alive at once: the previous one (velocity), the current one and the
+// next one being read ahead.
+constexpr double kFramesInFlight = 3;
+// ---- patches ------------------------------------------------------------------
+// Per patch vertex: position 24, rest uv 16, surface triangle 4, quality 4,
+// border 1, weight 4; per patch triangle: indices 12, quality 4, delta 4.
+// Vectors grow by doubling: provision 1.5x.
+constexpr double kPatchVertexBytes = 1.5 * 53, kPatchTriangleBytes = 1.5 * 20;
+// Per patch: its struct, the held-cell grid (2 KiB) and the raster's
+// per-patch tables. With the lattice's 204 vertices a patch comes to 32 KiB;
+// measured: 33 KiB per patch alive (dam_break, radius 0.01 against the default).
+constexpr double kPatchFixedBytes = 4000;
+// A lattice patch has about 5.67 / e^2 vertices for a remesh edge e r (an
+// equilateral lattice of edge 0.8 e r over a disk of radius r), twice as many
+// triangles.
+constexpr double kLatticeVertexFactor = 5.67;
+// Population over the patches that cover the surface once (area / pi r^2):
+// a Poisson seeding at spacing r holds 2.0x that (945 on dam_break's first
+// frame for 477), and the population grows up to 3.7x a fresh seeding
+// without the temporal options (channel, docs/temporal.md): 8x.
+constexpr double kPopulationFactor = 8;
+// Poisson-disk candidates: 40 per area / d^2, 32 bytes each, twice (the
+// first frame's seeding and the read-ahead's fresh-seeding count).
+constexpr double kSeedingBytesPerUnit = 2 * 40 * 32;
+// ---- exemplar -------------------------------------------------------------------
+// Per exemplar pixel beyond the decoded files: RGB copy (12), grey feature
+// and displacement (4 + 4), the mip pyramid of R G B H (16 x 4/3), the
+// erosion map and its held maximum (4 + 4).
+constexpr double kExemplarPixelBytes = 12 + 4 + 4 + 16 * 4.0 / 3 + 4 + 4;
+// The program, its libraries, thread stacks and allocator slack: the peak of
+// a 1024^2 dam_break bake less the parts above.
+constexpr double kBaseBytes = 120.0 * (1 << 20);
+
+std::string area_text(double area) { return fmt::format("{:.3g} m²", area); }
+
+}  // namespace
+
+BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
+  BakeInputSizes s;
+  const FramePattern meshes(o.mesh_pattern);
+  const std::vector<int> frames = resolve_frames(meshes, o.frames);
+  s.first_mesh = meshes.path(frames.front());
+  TriMesh first;
+  try {
+    first = read_mesh(s.first_mesh);
+  } catch (const InputError& e) {
+    throw e.with_frame(frames.front());
+  }
+  s.area = surface_area(first);
+  s.triangles = first.triangle_count();
+  s.vertices = first.vertex_count();
+  // File sizes only (a stat per frame): the largest frame over the first.
+  std::error_code ec;
+  const double first_bytes = double(fs::file_size(s.first_mesh, ec));
+  if (!ec && first_bytes > 0) {
+    double largest = first_bytes;
+    for (int f : frames) {
+      const auto bytes = fs::file_size(meshes.path(f), ec);
+      if (!ec) largest = std::max(largest, double(bytes));
+    }
+    s.growth = largest / first_bytes;
+  }
+  s.color = read_image_header(o.exemplar_color);
+  if (!o.exemplar_feature.empty()) s.feature = read_image_header(o.exemplar_feature);
+  if (!o.exemplar_displacement.empty()) s.displacement = read_image_header(o.exemplar_displacement);
+  return s;
+}
+
+BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSizes& s) {
+  BakeMemoryEstimate e;
+  const double r = o.patch.radius, spacing = o.seeding.spacing;
+  const double d = spacing * r;
+  // Areas grow with the sequence roughly as the files do.
+  const double area = s.area * s.growth;
+  e.covering_patches = r > 0 ? s.area / (std::numbers::pi * d * d) : 0;
+  e.patches = kPopulationFactor * (r > 0 ? area / (std::numbers::pi * d * d) : 0);
+  double& vertices_per_patch = e.vertices_per_patch;
+  if (o.patch.remesh) {
+    const double edge = o.patch.remesh_edge;
+    vertices_per_patch = kLatticeVertexFactor / (edge * edge);
+  } else {
+    // The fluid's own vertices within r.
+    vertices_per_patch = s.area > 0 ? std::numbers::pi * r * r * double(s.vertices) / s.area : 0;
+  }
+  vertices_per_patch = std::max(vertices_per_patch, 16.0);
+  e.patch_bytes =
+      e.patches * (kPatchFixedBytes + vertices_per_patch * (kPatchVertexBytes + 2 * kPatchTriangleBytes));
+  e.seeding = r > 0 ? kSeedingBytesPerUnit * std::min(area / (d * d), 5e8 / 40) : 0;
+
+  const double n2 = double(o.atlas.resolution) * double(o.atlas.resolution);
+  double chart = kChartTexelBytes;
+  if (o.raster.mode == RasterMode::Blend) chart += kBlendChartTexelBytes;
+  e.atlas = n2 * (kAtlasTexelBytes + (o.aov ? kAovTexelBytes : 0) + kUtilization * chart);
+  // With background writing one more frame of images waits for the disk.
+  if (o.background_write) e.atlas += n2 * (16 + 4 + (o.aov ? kAovTexelBytes : 0));
+
+  e.meshes = kFramesInFlight * kTriangleBytes * double(s.triangles) * s.growth;
+
+  const double pixels = double(s.color.width) * double(s.color.height);
+  e.exemplar = s.color.decoded_bytes() + s.feature.decoded_bytes() + s.displacement.decoded_bytes() +
+               pixels * kExemplarPixelBytes;
+  e.base = kBaseBytes;
+  e.total = e.atlas + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
+  return e;
+}
+
+BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes& s) {
+  const BakeMemoryEstimate e = estimate_bake_memory(o, s);
+  const std::size_t budget = o.max_memory > 0 ? o.max_memory : default_memory_budget();
+  const std::string radius = fmt::format("radius {:.3g} m on {} of surface ({})", o.patch.radius,
+                                         area_text(s.area), s.first_mesh);
+  // Each image on its own first, so that the message names the file whose
+  // header is absurd (a 1 KB PNG that claims 100000x100000).
+  check_image_budget(o.exemplar_color, s.color, 4.0 * s.color.channels + kExemplarPixelBytes, budget);
+  if (s.feature.width > 0) check_image_budget(o.exemplar_feature, s.feature, 4.0 * s.feature.channels + 8, budget);
+  if (s.displacement.width > 0)
+    check_image_budget(o.exemplar_displacement, s.displacement, 4.0 * s.displacement.channels + 8, budget);
+  if (e.covering_patches > kMaxPatches)
+    throw UsageError(fmt::format("--{} would need {:.2g} patches (more than {:.0e}){}", radius, e.covering_patches,
+                                 kMaxPatches,
+                                 o.seeding.spacing != 1 ? fmt::format(" at --spacing {:.3g}", o.seeding.spacing)
+                                                        : std::string(": is the radius in metres?")));
+  if (e.total <= double(budget)) return e;
+  // Name what takes most of it.
+  struct Part {
+    double bytes;
+    std::string what;
+  };
+  const Part parts[] = {
+      {e.atlas, fmt::format("--resolution {}: {} of atlas buffers", o.atlas.resolution, format_bytes(e.atlas))},
+      {e.patch_bytes + e.seeding,
+       fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {}",
+                   radius, e.patches, e.vertices_per_patch, o.seeding.spacing, o.patch.remesh_edge,
+                   format_bytes(e.patch_bytes + e.seeding))},
+      {e.meshes, fmt::format("{}: {} triangles per frame: {} for the frames in flight", s.first_mesh, s.triangles,
+                             format_bytes(e.meshes))},
+      {e.exemplar, fmt::format("--exemplar {}: {}x{} pixels: {}", o.exemplar_color, s.color.width, s.color.height,
+                               format_bytes(e.exemplar))},
+  };
+  const Part& top = *std::max_element(std::begin(parts), std::end(parts),
+                                      [](const Part& a, const Part& b) { return a.bytes < b.bytes; });
+  throw UsageError(fmt::format("the bake would need about {} of memory, more than --max-memory {}; {} "
+                               "(docs/robustness.md)",
+                               format_bytes(e.total), format_bytes(double(budget)), top.what));
+}
+
+double estimate_atlas_memory(std::size_t triangles, int resolution, bool texels_png) {
+  const double n2 = double(resolution) * double(resolution);
+  // The texel map (16 bytes per chart texel, at most every texel) and its
+  // raster bands: 18 (measured: 1,173 MiB at 8192² on dam_break); with
+  // --texels the float RGB image (12) and its 8- and 16-bit copies (3 + 6).
+  return kBaseBytes + kTriangleBytes * double(triangles) + n2 * (18 + (texels_png ? 21 : 0));
+}
+
+void check_image_budget(const std::string& path, const ImageHeader& h, double bytes_per_pixel, std::size_t budget) {
+  const double bytes = double(h.width) * double(h.height) * bytes_per_pixel;
+  if (bytes > double(budget))
+    throw InputError(path, fmt::format("the header says {}x{} pixels x {} channels: working on it needs about {}, "
+                                       "more than --max-memory {}",
+                                       h.width, h.height, h.channels, format_bytes(bytes),
+                                       format_bytes(double(budget))));
+}
+
+}  // namespace lapflow
