@@ -1,5 +1,6 @@
 // `lapflow bake`: the product. Parses options (and a TOML scene file whose
 // keys mirror them), resolves defaults, and runs the frame loop.
+#include <algorithm>
 #include <filesystem>
 #include <map>
 
@@ -26,15 +27,19 @@ void bake_with_progress(BakeOptions& o) {
        o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
   Progress progress("bake", frames.size());
   double seconds = 0;
+  std::size_t baked = 0;  // fewer than frames.size() when --resume skipped the frames already there
   bake(o, [&](const FrameStats& s) {
     seconds += s.seconds_total;
+    ++baked;
     progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
                               s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
                               100 * s.coverage, s.seconds_total));
   });
   progress.finish();
-  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", frames.size(), seconds,
-       seconds / double(frames.size()), peak_rss_mb(), o.out_dir);
+  if (baked < frames.size())
+    info("resumed: {} of the {} frames were already baked in {}", frames.size() - baked, frames.size(), o.out_dir);
+  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", baked, seconds,
+       seconds / double(std::max<std::size_t>(baked, 1)), peak_rss_mb(), o.out_dir);
 }
 
 namespace {
