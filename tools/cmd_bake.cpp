@@ -1,5 +1,6 @@
 // `lapflow bake`: the product. Parses options (and a TOML scene file whose
 // keys mirror them), resolves defaults, and runs the frame loop.
+#include <algorithm>
 #include <filesystem>
 #include <map>
 
@@ -31,15 +32,19 @@ void bake_with_progress(BakeOptions& o) {
        format_bytes(double(o.max_memory > 0 ? o.max_memory : default_memory_budget())));
   Progress progress("bake", frames.size());
   double seconds = 0;
+  std::size_t baked = 0;  // fewer than frames.size() when --resume skipped the frames already there
   bake(o, [&](const FrameStats& s) {
     seconds += s.seconds_total;
+    ++baked;
     progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
                               s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
                               100 * s.coverage, s.seconds_total));
   });
   progress.finish();
-  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", frames.size(), seconds,
-       seconds / double(frames.size()), peak_rss_mb(), o.out_dir);
+  if (baked < frames.size())
+    info("resumed: {} of the {} frames were already baked in {}", frames.size() - baked, frames.size(), o.out_dir);
+  info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", baked, seconds,
+       seconds / double(std::max<std::size_t>(baked, 1)), peak_rss_mb(), o.out_dir);
 }
 
 namespace {
@@ -47,8 +52,25 @@ namespace {
 struct BakeCli {
   BakeOptions o;
   std::string frames, orientation = "random", exr_type = "half", compression = "rle", mode = "erosion";
+  std::string keep_states = "2";
   bool no_remesh = false;
 };
+
+/// --keep-states: all, last (1), none (0) or a count.
+int parse_keep_states(const std::string& text) {
+  if (text == "all") return -1;
+  if (text == "last") return 1;
+  if (text == "none") return 0;
+  std::size_t used = 0;
+  int n = -1;
+  try {
+    n = std::stoi(text, &used);
+  } catch (const std::exception&) {
+  }
+  if (used != text.size() || n < 0)
+    throw UsageError("--keep-states: '" + text + "' is not all, last, none or a count of frames");
+  return n;
+}
 
 void run_bake(BakeCli& c) {
   apply_global_options();
@@ -65,6 +87,7 @@ void run_bake(BakeCli& c) {
       {"none", ExrCompression::None}, {"rle", ExrCompression::Rle}};
   o.exr.compression = compressions.at(c.compression);
   o.raster.mode = parse_raster_mode(c.mode);
+  o.keep_states = parse_keep_states(c.keep_states);
   bake_with_progress(o);
 }
 
@@ -86,12 +109,17 @@ void add_bake_command(CLI::App& app) {
       "  NAME.disp.N.exr           Y: displacement from the exemplar's height map\n"
       "  NAME.aov.N.exr            patch_id u v w per texel (with --aov)\n"
       "  NAME.patches.N.ply        the patches (with --dump-patches)\n"
+      "  NAME.state.N.bin          the patch state at the end of frame N, for --resume (the last 2 frames'\n"
+      "                            by default: --keep-states)\n"
       "  NAME.stats.jsonl          one JSON line per frame: counts, coverage, seconds per stage, memory\n"
       "Every file of a frame is written to a temporary name; they are renamed into place together, the OBJ\n"
       "last: a frame whose OBJ is there is complete. A bake first removes the temporary files (.NAME.*.tmp*)\n"
       "that killed runs of it left in --out. SIGINT or SIGTERM stops at the next frame boundary (a frame being\n"
       "written is finished, one being computed is dropped); a second one stops at once. Neither leaves a\n"
-      "temporary file.\n\n"
+      "temporary file.\n"
+      "--resume continues a killed or stopped bake after its last complete frame with a state, with the same\n"
+      "options (checked against NAME.bake.json: a difference is exit 2 naming it), and gives the same bytes in\n"
+      "every file as an uninterrupted bake. Without --resume a bake starts from the first frame.\n\n"
       "A scene file (lapflow bake scene.toml) holds the same options as keys (mesh = \"...\", radius = 0.05);\n"
       "options given on the command line override it. Paths in it are relative to the file.\n\n"
       "Exit codes: 0 ok, 2 bad input or usage (the message names the file, frame and element) or an output\n"
@@ -144,6 +172,14 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_option("--out", o.out_dir, "Output folder (created)")->group("Output");
   cmd.add_option("--name", o.name, "Output file prefix (default: the mesh pattern's name)")->group("Output");
   o.name.clear();
+  cmd.add_flag("--resume", o.resume,
+               "Continue after the last complete frame in --out that has a state (NAME.state.N.bin), with the same "
+               "options; bake from the first frame when there is none")
+      ->group("Output");
+  cmd.add_option("--keep-states", c.keep_states,
+                 "Patch states kept in --out: the last N frames' (all, last = 1, none = 0: no --resume)")
+      ->capture_default_str()
+      ->group("Output");
   cmd.add_flag("--aov", o.aov, "Also write NAME.aov.N.exr: patch_id, u, v, w per texel")->group("Output");
   cmd.add_flag("--dump-patches", o.dump_patches, "Also write the patches of every frame as NAME.patches.N.ply")
       ->group("Output");

@@ -69,6 +69,8 @@ void run_demo(const DemoCommandOptions& o) {
   b.seed = globals().seed;
   b.patch.radius = o.radius;
   b.atlas.resolution = o.atlas_resolution;
+  // The demo has no --resume: its 100 MB states would only fill the disk.
+  b.keep_states = 0;
   bake_with_progress(b);
   if (!o.preview) return;
   // What a user looks at first: a picture of every baked frame (and an MP4

@@ -10,12 +10,18 @@
 #include <climits>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <set>
 
 #include "bake/read_ahead.hpp"
 #include "bake/writer.hpp"
 #include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
 #include "lapflow/io/atomic_file.hpp"
@@ -141,6 +147,79 @@ void stop_if_asked(detail::FrameWriter& writer) {
   }
 }
 
+/// Where a bake starts: after frames[index] with `state`, or from the first
+/// frame (index < 0).
+struct ResumePoint {
+  std::ptrdiff_t index = -1;
+  BakeState state;
+};
+
+/// Removes the NAME.state.N.bin files in --out that this bake will not
+/// resume from: every one for a bake from the first frame, those of the frames
+/// after `from` (an earlier run's, about to be recomputed) otherwise.
+void remove_states_after(const BakeOptions& o, const BakeManifest& names, std::ptrdiff_t from) {
+  const std::regex state(bake_state_file_pattern(o.name));
+  std::set<std::string> keep;
+  for (std::ptrdiff_t i = 0; i <= from; ++i)
+    keep.insert(fs::path(names.frame_file("state", names.frames[std::size_t(i)])).filename().string());
+  std::error_code ec;
+  for (const fs::directory_entry& e : fs::directory_iterator(o.out_dir, ec)) {
+    const std::string file = e.path().filename().string();
+    if (std::regex_match(file, state) && !keep.count(file)) fs::remove(e.path(), ec);
+  }
+}
+
+/// --resume: the last frame of an unbroken run of complete frames (each
+/// with its OBJ) from the first that has a state, checked against the
+/// options. Throws InputError naming the manifest and each difference, or
+/// the state file and what is wrong with it.
+ResumePoint find_resume_point(const BakeOptions& o, const BakeManifest& current) {
+  ResumePoint point;
+  const std::string manifest_path = bake_manifest_path(o.out_dir, o.name);
+  if (!fs::exists(manifest_path)) return point;  // nothing baked here yet
+  const std::vector<std::string> differences = bake_manifest_differences(manifest_path, current);
+  if (!differences.empty()) {
+    std::string what;
+    for (std::size_t i = 0; i < differences.size() && i < 4; ++i) what += (i ? "; " : "") + differences[i];
+    if (differences.size() > 4) what += "; and " + std::to_string(differences.size() - 4) + " more";
+    throw InputError(manifest_path, "cannot resume: the bake in this folder was made with other options (" + what +
+                                        "); run without --resume to bake from the first frame");
+  }
+  const std::vector<int>& frames = current.frames;
+  for (std::size_t i = 0; i < frames.size() && fs::exists(current.frame_file("obj", frames[i])); ++i)
+    if (fs::exists(current.frame_file("state", frames[i]))) point.index = std::ptrdiff_t(i);
+  if (point.index < 0) return point;
+  const int frame = frames[std::size_t(point.index)];
+  const std::string path = current.frame_file("state", frame);
+  point.state = read_bake_state(path);
+  const BakeStateHeader& h = point.state.header;
+  if (h.name != o.name || h.frame != frame)
+    throw InputError(path, "the state is of bake '" + h.name + "' frame " + std::to_string(h.frame) +
+                               ", not of '" + o.name + "' frame " + std::to_string(frame));
+  if (h.options_checksum != bake_manifest_checksum(current))
+    throw InputError(path, "the state was written by a bake with other options than NAME.bake.json's");
+  return point;
+}
+
+/// NAME.stats.jsonl's lines of the frames up to and including the resume
+/// point, in frame order; the resumed frame's line from its state when a
+/// kill came before it was written.
+std::string stats_lines_until(const BakeOptions& o, const BakeManifest& names, const ResumePoint& point) {
+  std::map<int, std::string> by_frame;
+  std::ifstream in(fs::path(o.out_dir) / (o.name + ".stats.jsonl"));
+  for (std::string line; std::getline(in, line);) {
+    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    if (j.is_object() && j.contains("frame") && j["frame"].is_number_integer())
+      by_frame.emplace(j["frame"].get<int>(), line);
+  }
+  by_frame.emplace(point.state.header.frame, point.state.header.stats_line);
+  std::string text;
+  for (std::ptrdiff_t i = 0; i <= point.index; ++i)
+    if (const auto line = by_frame.find(names.frames[std::size_t(i)]); line != by_frame.end())
+      text += line->second + "\n";
+  return text;
+}
+
 }  // namespace
 
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
@@ -151,14 +230,25 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
   const BakeManifest manifest = make_bake_manifest(o, frames);
+  ResumePoint resume;
+  if (o.resume) resume = find_resume_point(o, manifest);
+  remove_states_after(o, manifest, resume.index);
   write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
 
-  detail::FrameReader reader(o, frames);
+  const std::vector<int> todo(frames.begin() + (resume.index + 1), frames.end());
+  detail::FrameReader reader(o, todo);
   detail::FrameWriter writer(o, manifest, on_frame);
   PatchSet patches;  // the state that carries over from frame to frame
   std::shared_ptr<const Frame> prev;
+  if (resume.index >= 0) {
+    // The patches from the state, and the resumed frame read again for the
+    // velocity the next advection starts from.
+    patches = std::move(resume.state.patches);
+    prev = load_frame(frame_source(o), resume.state.header.frame);
+    writer.resume(stats_lines_until(o, manifest, resume), resume.state.header.frame);
+  }
   try {
-    for (std::size_t left = frames.size(); left > 0; --left) {
+    for (std::size_t left = todo.size(); left > 0; --left) {
       stop_if_asked(writer);
       Stopwatch frame_clock, clock;
       // Read ahead: mesh, surface query, velocity, and step 6, the frame's

@@ -1,6 +1,9 @@
 // NAME.bake.json: the inputs and settings of a bake, for eval and preview.
 #include "lapflow/bake/manifest.hpp"
 
+#include <fmt/format.h>
+#include <zlib.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -61,14 +64,28 @@ RasterMode parse_raster_mode(const std::string& name) {
   throw UsageError("unknown mode '" + name + "' (expected erosion, blend or advect)");
 }
 
-std::vector<std::string> bake_file_stem_patterns(const std::string& name) {
+namespace {
+
+/// `name` as a regex matching itself.
+std::string regex_escaped(const std::string& name) {
   std::string n;
   for (char c : name) {
     if (std::string_view("\\^$.|?*+()[]{}").find(c) != std::string_view::npos) n += '\\';
     n += c;
   }
+  return n;
+}
+
+}  // namespace
+
+std::string bake_state_file_pattern(const std::string& name) {
+  return regex_escaped(name) + "\\.state\\.[0-9]+\\.bin";
+}
+
+std::vector<std::string> bake_file_stem_patterns(const std::string& name) {
+  const std::string n = regex_escaped(name);
   // The kinds of frame_file() below, and the two files of the whole bake.
-  return {n + "\\.(color|disp|aov|patches)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
+  return {n + "\\.(color|disp|aov|patches|state)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
 }
 
 std::string bake_manifest_path(const std::string& dir, const std::string& name) {
@@ -83,6 +100,8 @@ std::string BakeManifest::frame_file(const std::string& kind, int frame) const {
     file = name + "." + digits + "." + kind;
   else if (kind == "patches")
     file = name + ".patches." + digits + ".ply";
+  else if (kind == "state")
+    file = name + ".state." + digits + ".bin";
   else
     file = name + "." + kind + "." + digits + ".exr";
   return (fs::path(dir) / file).string();
@@ -114,11 +133,39 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   m.seed = o.seed;
   m.aov = o.aov;
   m.dump_patches = o.dump_patches;
+  // fmt's shortest representation reads back to the same double.
+  const auto text = [](auto v) { return fmt::format("{}", v); };
+  std::map<std::string, std::string>& s = m.settings;
+  s["velocity_band"] = text(o.velocity_band);
+  s["velocity_voxel"] = text(o.velocity_voxel);
+  s["spacing"] = text(o.seeding.spacing);
+  s["remesh"] = text(o.patch.remesh);
+  s["remesher"] = text(int(o.patch.remesher));
+  s["remesh_edge"] = text(o.patch.remesh_edge);
+  s["align"] = o.patch.align ? fmt::format("{},{},{}", o.patch.align_direction.x, o.patch.align_direction.y,
+                                           o.patch.align_direction.z)
+                             : "random";
+  s["advect_max_step_fraction"] = text(o.advect.max_step_fraction);
+  s["advect_max_turn"] = text(o.advect.max_turn);
+  s["advect_max_projection"] = text(o.advect.max_projection);
+  s["center_radius"] = text(o.weights.center_radius);
+  s["gutter"] = text(o.atlas.gutter);
+  s["max_stretch"] = text(o.atlas.max_stretch);
+  s["fill_holes"] = text(o.raster.fill_holes);
+  s["retire"] = text(o.raster.retire);
+  s["mipmap"] = text(o.raster.mipmap);
+  s["trilinear"] = text(o.raster.trilinear);
+  s["dilate"] = text(o.raster.dilate);
+  s["max_hole_patches"] = text(o.raster.max_hole_patches);
+  s["exr_type"] = text(int(o.exr.type));
+  s["exr_compression"] = text(int(o.exr.compression));
   return m;
 }
 
-void write_bake_manifest(const BakeManifest& m, const std::string& path) {
-  const nlohmann::json j = {{"lapflow_bake", m.version},
+namespace {
+
+nlohmann::json manifest_json(const BakeManifest& m) {
+  return {{"lapflow_bake", m.version},
                             {"name", m.name},
                             {"mesh", m.mesh_pattern},
                             {"velocity_vdb", m.velocity_vdb_pattern},
@@ -141,8 +188,49 @@ void write_bake_manifest(const BakeManifest& m, const std::string& path) {
                             {"resolution", m.resolution},
                             {"seed", m.seed},
                             {"aov", m.aov},
-                            {"dump_patches", m.dump_patches}};
-  write_text_atomically(path, j.dump(2) + "\n");
+                            {"dump_patches", m.dump_patches},
+                            {"settings", m.settings}};
+}
+
+/// The manifest file at `path` as JSON; throws InputError naming it.
+nlohmann::json read_manifest_json(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path, "cannot open the bake manifest");
+  try {
+    return nlohmann::json::parse(in);
+  } catch (const std::exception& e) {
+    throw InputError(path, std::string("not valid JSON: ") + e.what());
+  }
+}
+
+}  // namespace
+
+void write_bake_manifest(const BakeManifest& m, const std::string& path) {
+  write_text_atomically(path, manifest_json(m).dump(2) + "\n");
+}
+
+std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current) {
+  const nlohmann::json was = read_manifest_json(path), now = manifest_json(current);
+  if (!was.is_object() || !was.contains("lapflow_bake"))
+    throw InputError(path, "not a lapflow bake manifest (no 'lapflow_bake')");
+  // Both flattened to "/settings/gutter"-style keys, so a nested option is
+  // named by itself.
+  const nlohmann::json a = was.flatten(), b = now.flatten();
+  std::vector<std::string> differences;
+  const auto shown = [](const nlohmann::json& j, const std::string& key) {
+    return j.contains(key) ? j[key].dump() : std::string("(absent)");
+  };
+  for (const auto& [key, value] : b.items())
+    if (!a.contains(key) || a[key] != value)
+      differences.push_back(key.substr(1) + ": " + shown(a, key) + " in the manifest, " + value.dump() + " now");
+  for (const auto& [key, value] : a.items())
+    if (!b.contains(key)) differences.push_back(key.substr(1) + ": " + value.dump() + " in the manifest, (absent) now");
+  return differences;
+}
+
+uint32_t bake_manifest_checksum(const BakeManifest& m) {
+  const std::string text = manifest_json(m).dump();
+  return uint32_t(crc32(0, reinterpret_cast<const Bytef*>(text.data()), uInt(text.size())));
 }
 
 BakeManifest read_bake_manifest(const std::string& path_in, const std::string& name) {
@@ -212,6 +300,7 @@ BakeManifest parse_bake_manifest(const std::string& text, const std::string& pat
     m.seed = whole_number<uint64_t>(j, "seed", 0, path.string());
     m.aov = j.value("aov", false);
     m.dump_patches = j.value("dump_patches", false);
+    if (j.contains("settings")) m.settings = j["settings"].get<std::map<std::string, std::string>>();
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {

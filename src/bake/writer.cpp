@@ -1,10 +1,12 @@
 #include "bake/writer.hpp"
 
+#include <algorithm>
 #include <exception>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "lapflow/bake/state.hpp"
 #include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/core/stopwatch.hpp"
@@ -35,7 +37,7 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"weights", s.seconds_weights},
                        {"seed", s.seconds_seed}, {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster},
                        {"draw", s.seconds_draw}, {"holes", s.seconds_holes}, {"resolve", s.seconds_resolve},
-                       {"retire", s.seconds_retire}, {"dilate", s.seconds_dilate}, {"write", s.seconds_write},
+                       {"retire", s.seconds_retire}, {"dilate", s.seconds_dilate}, {"write", s.seconds_write}, {"state", s.seconds_state},
                        {"total", s.seconds_total}}},
           {"peak_rss_mb", s.peak_rss_mb}};
 }
@@ -49,6 +51,7 @@ struct FrameWriter::Job {
   SurfaceAtlas atlas;
   std::shared_ptr<const Frame> surface;  ///< for the mesh
   PatchSet patches;                      ///< a copy, with dump_patches only
+  std::string state;                     ///< NAME.state.N.bin's bytes, unless keep_states is 0
 };
 
 FrameWriter::FrameWriter(const BakeOptions& options, const BakeManifest& names,
@@ -56,7 +59,24 @@ FrameWriter::FrameWriter(const BakeOptions& options, const BakeManifest& names,
     : options_(options),
       names_(names),
       on_frame_(std::move(on_frame)),
-      stats_path_((fs::path(options.out_dir) / (options.name + ".stats.jsonl")).string()) {}
+      stats_path_((fs::path(options.out_dir) / (options.name + ".stats.jsonl")).string()),
+      options_checksum_(bake_manifest_checksum(names)) {}
+
+void FrameWriter::resume(std::string stats_lines, int last_frame) {
+  stats_text_ = std::move(stats_lines);
+  last_complete_frame_ = last_frame;
+  note_complete_frame(last_frame);
+}
+
+std::string FrameWriter::stats_line_without_timings(const FrameStats& stats) {
+  FrameStats s = stats;
+  s.seconds_read = s.seconds_advect = s.seconds_weights = s.seconds_seed = s.seconds_atlas = s.seconds_raster =
+      s.seconds_write = s.seconds_total = 0;
+  s.seconds_state = 0;
+  s.seconds_draw = s.seconds_holes = s.seconds_resolve = s.seconds_retire = s.seconds_dilate = 0;
+  s.peak_rss_mb = 0;
+  return stats_json(s).dump();
+}
 
 double FrameWriter::write_files(const Job& w) const {
   Stopwatch clock;
@@ -86,11 +106,14 @@ double FrameWriter::write_files(const Job& w) const {
     write_uv_mesh_obj(obj, w.surface->mesh, w.atlas, material, &staged);
   });
   if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names_.frame_file("patches", f), w.patches, &staged); });
+  // The state goes into the same group: a frame with an OBJ has its state.
+  if (!w.state.empty()) jobs.push_back([&] { write_bake_state(names_.frame_file("state", f), w.state, &staged); });
   if (o.background_write) {
     // One after the other on this thread (OpenEXR compresses on its own
     // pool): the writer must not take the TBB workers the next frame needs.
     for (const auto& job : jobs) job();
     staged.commit(obj);
+    remove_old_state(f);
     return clock.lap();
   }
   // Nothing else runs: the files are written concurrently (OIIO converts
@@ -110,7 +133,19 @@ double FrameWriter::write_files(const Job& w) const {
     if (e) std::rethrow_exception(e);  // `staged` removes the frame's temporary files
   // The OBJ is the frame's commit file: renamed last, after every other file.
   staged.commit(obj);
+  remove_old_state(f);
   return clock.lap();
+}
+
+void FrameWriter::remove_old_state(int frame) const {
+  // Only once this frame's state is in place: there is always one to resume from.
+  const int keep = options_.keep_states;
+  if (keep <= 0) return;
+  const std::vector<int>& frames = names_.frames;
+  const auto at = std::find(frames.begin(), frames.end(), frame);
+  if (at - frames.begin() < keep) return;
+  std::error_code ec;
+  fs::remove(names_.frame_file("state", *(at - keep)), ec);
 }
 
 void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds) {
@@ -120,6 +155,16 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
   job->atlas = std::move(frame->atlas);
   job->surface = frame;
   if (options_.dump_patches) job->patches = patches;
+  if (options_.keep_states != 0) {
+    Stopwatch clock;
+    BakeStateHeader header;
+    header.name = options_.name;
+    header.frame = frame->number;
+    header.options_checksum = options_checksum_;
+    header.stats_line = stats_line_without_timings(frame->stats);
+    job->state = encode_bake_state(header, patches);
+    frame->stats.seconds_state = clock.lap();
+  }
   finish();  // at most one frame in flight: bounds memory to two frames of images
   pending_stats_ = frame->stats;
   pending_compute_seconds_ = compute_seconds;

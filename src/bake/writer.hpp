@@ -24,12 +24,20 @@ class FrameWriter {
   void write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds);
   /// Waits for the frame in flight, if any; rethrows its write error.
   void finish();
+  /// A resumed bake: NAME.stats.jsonl starts with these lines (the frames
+  /// already baked), and frame `last_frame` counts as complete.
+  void resume(std::string stats_lines, int last_frame);
+  /// NAME.stats.jsonl's line of `stats` with its timings and memory zeroed
+  /// (what a state file keeps).
+  static std::string stats_line_without_timings(const FrameStats& stats);
   /// The last frame whose files and stats line are all written, if any.
   std::optional<int> last_complete_frame() const { return last_complete_frame_; }
 
  private:
   struct Job;
   double write_files(const Job& job) const;
+  /// Removes the state keep_states frames before `frame`.
+  void remove_old_state(int frame) const;
 
   const BakeOptions& options_;
   const BakeManifest& names_;
@@ -39,6 +47,7 @@ class FrameWriter {
   FrameStats pending_stats_;
   double pending_compute_seconds_ = 0;
   std::optional<int> last_complete_frame_;
+  uint32_t options_checksum_ = 0;
 };
 
 }  // namespace lapflow::detail

@@ -86,7 +86,7 @@ TEST(BakeWriter, SameInputsGiveByteIdenticalFiles) {
 
   const std::vector<std::string> files = names_in(a.str());
   ASSERT_EQ(files, names_in(b.str()));
-  ASSERT_EQ(files.size(), 3 * std::size(kFrameFiles) + 2);  // + bake.json, stats.jsonl
+  ASSERT_EQ(files.size(), 3 * std::size(kFrameFiles) + 4);  // + bake.json, stats.jsonl, states 2 and 3
   for (const std::string& f : files) {
     if (f == "t.stats.jsonl") continue;
     const std::string bytes = test::read_bytes(a / f);

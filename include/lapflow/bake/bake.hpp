@@ -49,6 +49,14 @@ struct BakeOptions {
   /// inputs whose estimate (bake/budget.hpp, docs/robustness.md) exceeds it.
   /// 0 = 80% of physical memory.
   std::size_t max_memory = 0;
+  /// Continue after the last complete frame of out_dir that has a state
+  /// (NAME.state.N.bin), when its NAME.bake.json has the same options;
+  /// otherwise, and without a state, bake from the first frame. Without
+  /// `resume` a bake always starts from the first frame.
+  bool resume = false;
+  /// The frames whose NAME.state.N.bin stays on disk: the last `keep_states`
+  /// (-1: all of them, 0: none, and no resume is possible).
+  int keep_states = 2;
   // Stages
   uint64_t seed = 1;
   PatchOptions patch;                     ///< patch.radius = r in metres (0 = automatic)
@@ -71,10 +79,14 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& options);
 /// Bakes every frame; `on_frame` is called after each frame is written.
 /// Files per frame N (4 digits) in out_dir: NAME.N.obj + NAME.N.mtl,
 /// NAME.color.N.exr, NAME.disp.N.exr, NAME.aov.N.exr (with aov),
-/// NAME.patches.N.ply (with dump_patches); NAME.stats.jsonl for the sequence.
+/// NAME.patches.N.ply (with dump_patches), NAME.state.N.bin (the last
+/// keep_states frames); NAME.stats.jsonl for the sequence.
 /// A frame's files are renamed into place together, the OBJ last: frame N
 /// is complete when NAME.N.obj exists. First removes this bake's stale
-/// temporary files from out_dir. Throws InputError for bad input,
+/// temporary files from out_dir. With `resume`, continues after the last
+/// complete frame with a state, with the same bytes in every file as an
+/// uninterrupted bake; an InputError names the manifest whose options differ
+/// (and each difference) or the damaged state file. Throws InputError for bad input,
 /// OutputError naming the folder or file that cannot be written (earlier
 /// frames stay intact), and Interrupted when stop_signal() (interrupt.hpp)
 /// asks to stop: checked before each frame and before writing one.

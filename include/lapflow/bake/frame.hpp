@@ -57,9 +57,10 @@ struct FrameStats {
   /// the atlas's own build time, on the read-ahead thread (so it overlaps
   /// the previous frame, except on the first); raster: draw, holes, resolve,
   /// retire and dilate together (each also on its own); total: this frame's
-  /// share of the bake's wall time (frames sum to the bake).
+  /// share of the bake's wall time (frames sum to the bake); state: encoding
+  /// NAME.state.N.bin in memory (its writing is part of write).
   double seconds_read = 0, seconds_advect = 0, seconds_weights = 0, seconds_seed = 0, seconds_atlas = 0,
-         seconds_raster = 0, seconds_write = 0, seconds_total = 0;
+         seconds_raster = 0, seconds_write = 0, seconds_total = 0, seconds_state = 0;
   double seconds_draw = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0, seconds_dilate = 0;
   double peak_rss_mb = 0;
   std::string velocity_source;

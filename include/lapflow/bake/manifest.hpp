@@ -3,6 +3,7 @@
 /// atomically when the bake starts, so that `lapflow eval` and
 /// `lapflow preview` can find the inputs and the per-frame files of a bake
 /// folder without being told again.
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,9 +30,13 @@ struct BakeManifest {
   int resolution = 0;
   uint64_t seed = 0;
   bool aov = false, dump_patches = false;
+  /// Every other option that changes the output (velocity band, remesher,
+  /// advection steps, gutter, EXR type, ...), as text that round-trips
+  /// exactly: what `--resume` compares besides the fields above.
+  std::map<std::string, std::string> settings;
 
   /// Path of frame `frame`'s file of the given kind: "obj", "mtl", "color",
-  /// "disp", "aov", "patches".
+  /// "disp", "aov", "patches", "state" (NAME.state.N.bin, bake/state.hpp).
   std::string frame_file(const std::string& kind, int frame) const;
 };
 
@@ -40,12 +45,25 @@ struct BakeManifest {
 /// `NAME\.[0-9]+`, `NAME\.stats`, ... For remove_stale_temporaries().
 std::vector<std::string> bake_file_stem_patterns(const std::string& name);
 
+/// An ECMAScript regex matching the whole file name of every state file of a
+/// bake named `name` (NAME.state.N.bin).
+std::string bake_state_file_pattern(const std::string& name);
+
 /// Path of NAME.bake.json in `dir`.
 std::string bake_manifest_path(const std::string& dir, const std::string& name);
 
 /// The manifest of a resolved bake (resolve_bake_options already ran).
 BakeManifest make_bake_manifest(const BakeOptions& options, const std::vector<int>& frames);
 void write_bake_manifest(const BakeManifest& manifest, const std::string& path);
+
+/// The options `current` and the manifest at `path` disagree on, one entry
+/// per key: "radius: 0.05 in the manifest, 0.04 now". Empty when they match.
+/// Throws InputError naming `path` when it cannot be read.
+std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current);
+
+/// A checksum (CRC-32) of the manifest's options: a state file records the
+/// one of the bake that wrote it.
+uint32_t bake_manifest_checksum(const BakeManifest& manifest);
 
 /// Reads `path`, or the single *.bake.json in `path` when it is a folder
 /// (`name` picks one when there are several). Throws InputError naming the

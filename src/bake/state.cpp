@@ -1,0 +1,190 @@
+// NAME.state.N.bin: the patch state at the end of a frame, for --resume.
+#include "lapflow/bake/state.hpp"
+
+#include <zlib.h>
+
+#include <bit>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <type_traits>
+
+#include "lapflow/core/errors.hpp"
+#include "lapflow/io/atomic_file.hpp"
+
+namespace lapflow {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "the state format is little-endian");
+static_assert(sizeof(Vec3) == 24 && sizeof(Vec2) == 16 && sizeof(Tri) == 12, "packed value types");
+
+constexpr const char* kMagic = "lapflow_state";
+
+uint32_t crc_of(const char* data, std::size_t size) {
+  return uint32_t(crc32(0, reinterpret_cast<const Bytef*>(data), uInt(size)));
+}
+
+/// Raw little-endian values and arrays appended to a byte string.
+struct Encoder {
+  std::string bytes;
+  template <class T>
+  void put(const T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    bytes.append(reinterpret_cast<const char*>(&v), sizeof v);
+  }
+  template <class T>
+  void put_array(const std::vector<T>& v) {
+    bytes.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+  }
+};
+
+/// The same, read back with every size checked against what is left.
+struct Decoder {
+  const std::string& path;
+  const char* at;
+  const char* end;
+  void need(std::size_t n) const {
+    if (n > std::size_t(end - at)) throw InputError(path, "damaged state: the patch data ends early");
+  }
+  template <class T>
+  T get() {
+    need(sizeof(T));
+    T v;
+    std::memcpy(&v, at, sizeof v);
+    at += sizeof v;
+    return v;
+  }
+  template <class T>
+  void get_array(std::vector<T>& v, uint64_t n) {
+    if (n > uint64_t(end - at) / sizeof(T)) throw InputError(path, "damaged state: a count larger than the file");
+    v.resize(n);
+    std::memcpy(v.data(), at, n * sizeof(T));
+    at += n * sizeof(T);
+  }
+};
+
+}  // namespace
+
+std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches) {
+  Encoder e;
+  e.put(patches.next_id);
+  e.put(uint64_t(patches.patches.size()));
+  for (const Patch& p : patches.patches) {
+    e.put(p.id);
+    e.put(int32_t(p.birth_frame));
+    e.put(p.center);
+    e.put(p.center_normal);
+    e.put(p.center_uv);
+    e.put(uint8_t(p.at_rest));
+    e.put(uint64_t(p.positions.size()));
+    e.put(uint64_t(p.triangles.size()));
+    e.put(uint64_t(p.held.size()));
+    // Per vertex, then per triangle, then the held bits.
+    e.put_array(p.positions);
+    e.put_array(p.rest_uv);
+    e.put_array(p.surface_triangle);
+    e.put_array(p.quality);
+    e.put_array(p.border);
+    e.put_array(p.weight);
+    e.put_array(p.triangles);
+    e.put_array(p.triangle_quality);
+    e.put_array(p.triangle_delta);
+    e.put_array(p.held);
+  }
+  // Ordered: the magic key comes first, so a file is recognised by its start.
+  nlohmann::ordered_json header = {{kMagic, BakeStateHeader::kVersion},
+                           {"name", s.name},
+                           {"frame", s.frame},
+                           {"options_checksum", s.options_checksum},
+                           {"patches", patches.patches.size()},
+                           {"next_id", patches.next_id},
+                           {"payload_bytes", e.bytes.size()},
+                           {"stats", s.stats_line.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json::parse(s.stats_line)}};
+  std::string bytes = header.dump() + "\n";
+  bytes += e.bytes;
+  const uint32_t crc = crc_of(bytes.data(), bytes.size());
+  bytes.append(reinterpret_cast<const char*>(&crc), sizeof crc);
+  return bytes;
+}
+
+void write_bake_state(const std::string& path, const std::string& bytes, StagedFiles* staged) {
+  write_text_atomically(path, bytes, staged);
+}
+
+BakeState read_bake_state(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "cannot open the bake state");
+  const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  if (in.bad()) throw InputError(path, "cannot read the bake state");
+  const std::size_t newline = bytes.find('\n');
+  if (newline == std::string::npos || !bytes.starts_with(std::string("{\"") + kMagic + "\""))
+    throw InputError(path, "not a lapflow bake state (it does not start with {\"lapflow_state\")");
+  uint32_t stored = 0;
+  if (bytes.size() < newline + 1 + sizeof stored)
+    throw InputError(path, "damaged state: truncated (" + std::to_string(bytes.size()) + " bytes)");
+  std::memcpy(&stored, bytes.data() + bytes.size() - sizeof stored, sizeof stored);
+  if (crc_of(bytes.data(), bytes.size() - sizeof stored) != stored)
+    throw InputError(path, "damaged state: checksum mismatch (the file is truncated or a byte changed)");
+
+  BakeState state;
+  BakeStateHeader& s = state.header;
+  nlohmann::json header;
+  try {
+    header = nlohmann::json::parse(bytes.begin(), bytes.begin() + std::ptrdiff_t(newline));
+    const int version = header.at(kMagic).get<int>();
+    if (version != BakeStateHeader::kVersion)
+      throw InputError(path, "state format version " + std::to_string(version) + ", this lapflow reads version " +
+                                 std::to_string(BakeStateHeader::kVersion));
+    s.name = header.at("name").get<std::string>();
+    s.frame = header.at("frame").get<int>();
+    s.options_checksum = header.at("options_checksum").get<uint32_t>();
+    if (!header.at("stats").is_null()) s.stats_line = header["stats"].dump();
+    const std::size_t payload = header.at("payload_bytes").get<std::size_t>();
+    if (payload != bytes.size() - newline - 1 - sizeof stored)
+      throw InputError(path, "damaged state: " + std::to_string(payload) + " bytes of patch data announced, " +
+                                 std::to_string(bytes.size() - newline - 1 - sizeof stored) + " present");
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(path, std::string("bad state header: ") + e.what());
+  }
+
+  Decoder d{path, bytes.data() + newline + 1, bytes.data() + bytes.size() - sizeof stored};
+  state.patches.next_id = d.get<uint32_t>();
+  const uint64_t count = d.get<uint64_t>();
+  if (count != header["patches"].get<uint64_t>() || state.patches.next_id != header["next_id"].get<uint32_t>())
+    throw InputError(path, "damaged state: the header and the patch data disagree");
+  for (uint64_t i = 0; i < count; ++i) {
+    Patch& p = state.patches.patches.emplace_back();
+    p.id = d.get<uint32_t>();
+    p.birth_frame = d.get<int32_t>();
+    p.center = d.get<Vec3>();
+    p.center_normal = d.get<Vec3>();
+    p.center_uv = d.get<Vec2>();
+    p.at_rest = d.get<uint8_t>() != 0;
+    const uint64_t nv = d.get<uint64_t>(), nt = d.get<uint64_t>(), nh = d.get<uint64_t>();
+    d.get_array(p.positions, nv);
+    d.get_array(p.rest_uv, nv);
+    d.get_array(p.surface_triangle, nv);
+    d.get_array(p.quality, nv);
+    d.get_array(p.border, nv);
+    d.get_array(p.weight, nv);
+    d.get_array(p.triangles, nt);
+    d.get_array(p.triangle_quality, nt);
+    d.get_array(p.triangle_delta, nt);
+    d.get_array(p.held, nh);
+    if (nh != 0 && nh != kHeldWords)
+      throw InputError(path, "damaged state: patch " + std::to_string(p.id) + " has " + std::to_string(nh) +
+                                 " held words (0 or " + std::to_string(kHeldWords) + " expected)");
+    for (const Tri& t : p.triangles)
+      for (const int32_t v : t)
+        if (v < 0 || uint64_t(v) >= nv)
+          throw InputError(path, "damaged state: patch " + std::to_string(p.id) + " has a triangle corner " +
+                                     std::to_string(v) + " outside its " + std::to_string(nv) + " vertices");
+  }
+  if (d.at != d.end) throw InputError(path, "damaged state: bytes left after the last patch");
+  return state;
+}
+
+}  // namespace lapflow
