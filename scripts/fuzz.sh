@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds lapflow's libFuzzer targets (tests/fuzz: PLY, OBJ, TOML scene file,
-# bake manifest; clang with AddressSanitizer and UndefinedBehaviorSanitizer)
+# bake manifest, bake state; clang with AddressSanitizer and UndefinedBehaviorSanitizer)
 # in build-fuzz/, replays each target's seed corpus (tests/fuzz/corpus/<target>),
 # then fuzzes each target for SECONDS (default 60). Fails on any crash,
 # sanitizer report, timeout, leak or allocation over the limit; the input
@@ -13,7 +13,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
-targets=(ply obj scene manifest)
+targets=(ply obj scene manifest state)
 jobs="${FUZZ_BUILD_JOBS:-2}"
 
 if ! command -v clang++ >/dev/null; then

@@ -15,6 +15,7 @@
 
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/errors.hpp"
+#include "core/json_number.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;
@@ -28,23 +29,7 @@ std::string absolute_or_empty(const std::string& p) {
   return ec ? p : a.lexically_normal().string();
 }
 
-// A field that must be a whole number of type T: nlohmann's get<int>() of
-// 1e30 converts out of range (undefined behaviour) and of 2.5 truncates.
-template <typename T>
-T whole_number(const nlohmann::json& v, const std::string& key, const std::string& path) {
-  if (v.is_number_unsigned()) {
-    if (const uint64_t u = v.get<uint64_t>(); std::in_range<T>(u)) return T(u);
-  } else if (v.is_number_integer()) {
-    if (const int64_t i = v.get<int64_t>(); std::in_range<T>(i)) return T(i);
-  }
-  throw InputError(path, "'" + key + "' must be a whole number from " + std::to_string(std::numeric_limits<T>::min()) +
-                             " to " + std::to_string(std::numeric_limits<T>::max()) + ", got " + v.dump().substr(0, 40));
-}
-
-template <typename T>
-T whole_number(const nlohmann::json& j, const std::string& key, T fallback, const std::string& path) {
-  return j.contains(key) ? whole_number<T>(j.at(key), key, path) : fallback;
-}
+using detail::whole_number;
 
 }  // namespace
 

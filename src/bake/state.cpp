@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <type_traits>
 
+#include "core/json_number.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/io/atomic_file.hpp"
 
@@ -35,7 +36,7 @@ struct Encoder {
   }
   template <class T>
   void put_array(const std::vector<T>& v) {
-    bytes.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) bytes.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
   }
 };
 
@@ -59,7 +60,7 @@ struct Decoder {
   void get_array(std::vector<T>& v, uint64_t n) {
     if (n > uint64_t(end - at) / sizeof(T)) throw InputError(path, "damaged state: a count larger than the file");
     v.resize(n);
-    std::memcpy(v.data(), at, n * sizeof(T));
+    if (n > 0) std::memcpy(v.data(), at, n * sizeof(T));  // an empty vector's data() may be null
     at += n * sizeof(T);
   }
 };
@@ -117,6 +118,11 @@ BakeState read_bake_state(const std::string& path) {
   if (!in) throw InputError(path, "cannot open the bake state");
   const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
   if (in.bad()) throw InputError(path, "cannot read the bake state");
+  return parse_bake_state(bytes, path);
+}
+
+BakeState parse_bake_state(const std::string& bytes, const std::string& path) {
+  using detail::whole_number;
   const std::size_t newline = bytes.find('\n');
   if (newline == std::string::npos || !bytes.starts_with(std::string("{\"") + kMagic + "\""))
     throw InputError(path, "not a lapflow bake state (it does not start with {\"lapflow_state\")");
@@ -130,17 +136,21 @@ BakeState read_bake_state(const std::string& path) {
   BakeState state;
   BakeStateHeader& s = state.header;
   nlohmann::json header;
+  uint64_t header_patches = 0;
+  uint32_t header_next_id = 0;
   try {
     header = nlohmann::json::parse(bytes.begin(), bytes.begin() + std::ptrdiff_t(newline));
-    const int version = header.at(kMagic).get<int>();
+    const int version = whole_number<int>(header.at(kMagic), kMagic, path);
     if (version != BakeStateHeader::kVersion)
       throw InputError(path, "state format version " + std::to_string(version) + ", this lapflow reads version " +
                                  std::to_string(BakeStateHeader::kVersion));
     s.name = header.at("name").get<std::string>();
-    s.frame = header.at("frame").get<int>();
-    s.options_checksum = header.at("options_checksum").get<uint32_t>();
+    s.frame = whole_number<int>(header.at("frame"), "frame", path);
+    s.options_checksum = whole_number<uint32_t>(header.at("options_checksum"), "options_checksum", path);
     if (!header.at("stats").is_null()) s.stats_line = header["stats"].dump();
-    const std::size_t payload = header.at("payload_bytes").get<std::size_t>();
+    header_patches = whole_number<uint64_t>(header.at("patches"), "patches", path);
+    header_next_id = whole_number<uint32_t>(header.at("next_id"), "next_id", path);
+    const std::size_t payload = whole_number<std::size_t>(header.at("payload_bytes"), "payload_bytes", path);
     if (payload != bytes.size() - newline - 1 - sizeof stored)
       throw InputError(path, "damaged state: " + std::to_string(payload) + " bytes of patch data announced, " +
                                  std::to_string(bytes.size() - newline - 1 - sizeof stored) + " present");
@@ -153,7 +163,7 @@ BakeState read_bake_state(const std::string& path) {
   Decoder d{path, bytes.data() + newline + 1, bytes.data() + bytes.size() - sizeof stored};
   state.patches.next_id = d.get<uint32_t>();
   const uint64_t count = d.get<uint64_t>();
-  if (count != header["patches"].get<uint64_t>() || state.patches.next_id != header["next_id"].get<uint32_t>())
+  if (count != header_patches || state.patches.next_id != header_next_id)
     throw InputError(path, "damaged state: the header and the patch data disagree");
   for (uint64_t i = 0; i < count; ++i) {
     Patch& p = state.patches.patches.emplace_back();

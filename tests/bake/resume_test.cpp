@@ -17,6 +17,8 @@
 #include "lapflow/addons/demo_scene.hpp"
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include <zlib.h>
+
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
@@ -210,6 +212,35 @@ TEST(BakeState, RoundTripsEveryFieldBitForBit) {
 
 // Every byte of the file counts: truncated anywhere, or one bit changed
 // anywhere, it is an InputError naming the file.
+TEST(BakeState, HeaderNumbersOutOfRangeAreAnErrorBehindAValidChecksum) {
+  // A header rewritten with a matching CRC (as a tool that edits the file
+  // would leave it): a frame of 1e30 or 2.5, or counts that are not whole
+  // numbers, are an InputError naming the file, never an out-of-range
+  // conversion (found by tests/fuzz/fuzz_state.cpp).
+  PatchSet set;
+  BakeStateHeader header;
+  header.name = "t";
+  header.frame = 3;
+  const std::string bytes = encode_bake_state(header, set);
+  const std::size_t newline = bytes.find('\n');
+  ASSERT_NE(newline, std::string::npos);
+  const std::string head = bytes.substr(0, newline), rest = bytes.substr(newline, bytes.size() - newline - 4);
+  for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+           {"\"frame\":3", "\"frame\":1e30"}, {"\"frame\":3", "\"frame\":2.5"},
+           {"\"patches\":0", "\"patches\":-1"}, {"\"next_id\":0", "\"next_id\":\"x\""}}) {
+    std::string edited = head;
+    const std::size_t at = edited.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    edited.replace(at, from.size(), to);
+    edited += rest;
+    const uint32_t crc = uint32_t(crc32(0, reinterpret_cast<const Bytef*>(edited.data()), uInt(edited.size())));
+    edited.append(reinterpret_cast<const char*>(&crc), sizeof crc);
+    EXPECT_NE(input_error_of([&] { parse_bake_state(edited, "t.state.0003.bin"); }).find("t.state.0003.bin"),
+              std::string::npos)
+        << to;
+  }
+}
+
 TEST(BakeState, ADamagedFileIsAnErrorNamingIt) {
   TempDir dir("state_damaged");
   PatchSet set;

@@ -41,5 +41,7 @@ void write_bake_state(const std::string& path, const std::string& bytes, StagedF
 /// missing, truncated, checksum mismatch (a changed byte), not a state file,
 /// another version, inconsistent counts.
 BakeState read_bake_state(const std::string& path);
+/// The same from the file's bytes in memory (`path` names it in errors).
+BakeState parse_bake_state(const std::string& bytes, const std::string& path);
 
 }  // namespace lapflow
