@@ -11,8 +11,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/bake/bake.hpp"
@@ -53,6 +55,36 @@ inline std::string read_bytes(const std::string& path) {
   std::ostringstream s;
   s << f.rdbuf();
   return s.str();
+}
+
+/// The names of the files in `dir`, sorted.
+inline std::vector<std::string> names_in(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+/// The temporary files (".tmp" in the name) left in `dir`, sorted.
+inline std::vector<std::string> temporaries_in(const std::string& dir) {
+  std::vector<std::string> t;
+  for (const std::string& n : names_in(dir))
+    if (n.find(".tmp") != std::string::npos) t.push_back(n);
+  return t;
+}
+
+/// A bake's NAME.stats.jsonl without what depends on the clock and the
+/// machine (seconds, peak memory).
+inline std::vector<nlohmann::json> stats_without_timings(const std::string& path) {
+  std::vector<nlohmann::json> lines;
+  std::istringstream in(read_bytes(path));
+  for (std::string line; std::getline(in, line);) {
+    nlohmann::json j = nlohmann::json::parse(line);
+    j.erase("seconds");
+    j.erase("peak_rss_mb");
+    lines.push_back(j);
+  }
+  return lines;
 }
 
 /// Appends the raw bytes of a value in the host (little-endian) order, or

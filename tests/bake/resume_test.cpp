@@ -41,25 +41,8 @@ BakeOptions small_bake(const std::string& meshes, const std::string& out) {
   return o;
 }
 
-std::vector<std::string> names_in(const std::string& dir) {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-/// NAME.stats.jsonl without what depends on the clock and the machine.
-std::vector<nlohmann::json> stats_without_timings(const std::string& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(test::read_bytes(path));
-  for (std::string line; std::getline(in, line);) {
-    nlohmann::json j = nlohmann::json::parse(line);
-    j.erase("seconds");
-    j.erase("peak_rss_mb");
-    lines.push_back(j);
-  }
-  return lines;
-}
+using test::names_in;
+using test::stats_without_timings;
 
 /// Every file of `a` is in `b` with the same bytes, and `b` has no other;
 /// NAME.stats.jsonl the same but for timings and memory.

@@ -38,32 +38,9 @@ BakeOptions small_bake(const std::string& meshes, const std::string& out) {
   return o;
 }
 
-std::vector<std::string> names_in(const std::string& dir) {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-std::vector<std::string> temporaries_in(const std::string& dir) {
-  std::vector<std::string> t;
-  for (const std::string& n : names_in(dir))
-    if (n.find(".tmp") != std::string::npos) t.push_back(n);
-  return t;
-}
-
-/// NAME.stats.jsonl without what depends on the clock and the machine.
-std::vector<nlohmann::json> stats_without_timings(const std::string& path) {
-  std::vector<nlohmann::json> lines;
-  std::istringstream in(test::read_bytes(path));
-  for (std::string line; std::getline(in, line);) {
-    nlohmann::json j = nlohmann::json::parse(line);
-    j.erase("seconds");
-    j.erase("peak_rss_mb");
-    lines.push_back(j);
-  }
-  return lines;
-}
+using test::names_in;
+using test::stats_without_timings;
+using test::temporaries_in;
 
 const char* const kFrameFiles[] = {"t.{:04d}.obj", "t.{:04d}.mtl", "t.color.{:04d}.exr", "t.disp.{:04d}.exr",
                                    "t.aov.{:04d}.exr", "t.patches.{:04d}.ply"};

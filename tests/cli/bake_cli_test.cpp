@@ -103,14 +103,7 @@ const std::vector<const char*> kFrameFiles = {"t.{:04d}.obj", "t.{:04d}.mtl", "t
 /// Without the AOV (bake_args(..., false)).
 const std::vector<const char*> kFrameFilesNoAov(kFrameFiles.begin(), kFrameFiles.end() - 1);
 
-std::vector<std::string> temporaries_in(const std::string& dir) {
-  std::vector<std::string> t;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    const std::string n = e.path().filename().string();
-    if (n.find(".tmp") != std::string::npos) t.push_back(n);
-  }
-  return t;
-}
+using test::temporaries_in;
 
 /// Every frame of `out` whose OBJ (the commit file) is there has all its
 /// files, byte-identical to `ref`'s. Returns those frames.
@@ -289,18 +282,7 @@ TEST_F(BakeSignals, KilledAtSeveralMomentsAndResumedGivesTheSameBytes) {
       if (f == "t.stats.jsonl") continue;
       EXPECT_TRUE(test::read_bytes(out / f) == test::read_bytes(*ref_ / f)) << f << " differs after the resume";
     }
-    const auto without_timings = [](const std::string& path) {
-      std::vector<nlohmann::json> lines;
-      std::istringstream in(test::read_bytes(path));
-      for (std::string line; std::getline(in, line);) {
-        nlohmann::json j = nlohmann::json::parse(line);
-        j.erase("seconds");
-        j.erase("peak_rss_mb");
-        lines.push_back(j);
-      }
-      return lines;
-    };
-    EXPECT_EQ(without_timings(out / "t.stats.jsonl"), without_timings(*ref_ / "t.stats.jsonl"));
+    EXPECT_EQ(test::stats_without_timings(out / "t.stats.jsonl"), test::stats_without_timings(*ref_ / "t.stats.jsonl"));
   }
 }
 

@@ -18,12 +18,7 @@ namespace fs = std::filesystem;
 namespace {
 
 /// Names in `dir`, sorted.
-std::vector<std::string> names_in(const std::string& dir) {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
+using test::names_in;
 
 std::size_t hidden_temporaries(const std::string& dir) {
   std::size_t n = 0;
