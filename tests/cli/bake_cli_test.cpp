@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <linux/capability.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -32,7 +34,7 @@ namespace {
 
 struct Limits {
   long file_size = -1;      ///< RLIMIT_FSIZE in bytes, -1 = none
-  bool drop_root = false;   ///< run as nobody when the tests run as root (permission bits bind)
+  bool drop_root = false;   ///< as root, drop the capabilities that override permission bits
 };
 
 /// Starts the lapflow binary with `args`; stderr goes to `err_path`.
@@ -54,7 +56,13 @@ pid_t start_lapflow(const std::vector<std::string>& args, const std::string& err
     const rlimit r{rlim_t(limits.file_size), rlim_t(limits.file_size)};
     if (::setrlimit(RLIMIT_FSIZE, &r) != 0) ::_exit(126);
   }
-  if (limits.drop_root && ::geteuid() == 0 && (::setgid(65534) != 0 || ::setuid(65534) != 0)) ::_exit(126);
+  // Root without the capabilities that override permission bits: the bits
+  // bind, and the binary, its libraries and the test's folders (perhaps in a
+  // private 0700 temp folder) stay reachable, as they would not for nobody.
+  if (limits.drop_root && ::geteuid() == 0 &&
+      (::prctl(PR_CAPBSET_DROP, CAP_DAC_OVERRIDE, 0, 0, 0) != 0 ||
+       ::prctl(PR_CAPBSET_DROP, CAP_DAC_READ_SEARCH, 0, 0, 0) != 0))
+    ::_exit(126);
   ::execv(argv[0], argv.data());
   ::_exit(127);
 }
