@@ -10,9 +10,21 @@
 #
 # New inputs the fuzzer finds go to build-fuzz/corpus/<target>, never into the
 # tree: copy a regression input into tests/fuzz/corpus/<target>/ by hand.
+#
+# FUZZ_SEED=S makes a run reproducible: the inputs come from that random seed
+# and the seed corpus only (build-fuzz/corpus is emptied first), so an input
+# that fails is found again at the same place on any machine. FUZZ_RUNS=N
+# stops each target after N inputs (or SECONDS, whichever comes first). CI
+# runs `FUZZ_SEED=1 FUZZ_RUNS=N fuzz.sh 60`: at most 60 s a target, never
+# past the N inputs that were checked from that seed before the commit
+# (`FUZZ_SEED=1 FUZZ_RUNS=N fuzz.sh 100000` runs all N), so CI's verdict on
+# a commit does not depend on luck. Open-ended fuzzing for new findings is
+# the plain SECONDS form.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
+runs="${FUZZ_RUNS:-}"
+seed="${FUZZ_SEED:-}"
 targets=(ply obj scene manifest state)
 jobs="${FUZZ_BUILD_JOBS:-2}"
 
@@ -45,8 +57,20 @@ for t in "${targets[@]}"; do
     status=1
     continue
   fi
-  echo "== fuzz_$t: fuzzing for $seconds s"
-  if ! "$bin" "${common[@]}" -max_total_time="$seconds" -artifact_prefix="build-fuzz/findings/$t-" \
+  budget=(-max_total_time="$seconds")
+  what="fuzzing for at most $seconds s"
+  if [ -n "$runs" ]; then
+    budget+=(-runs="$runs")
+    what+=", $runs inputs"
+  fi
+  if [ -n "$seed" ]; then
+    # A fresh, empty work folder: the run depends on the seed corpus only.
+    rm -rf "$work" && mkdir -p "$work"
+    budget+=(-seed="$seed")
+    what+=" from seed $seed"
+  fi
+  echo "== fuzz_$t: $what"
+  if ! "$bin" "${common[@]}" "${budget[@]}" -artifact_prefix="build-fuzz/findings/$t-" \
       "$work" "$seeds" >"build-fuzz/fuzz_$t.log" 2>&1; then
     echo "fuzz_$t: FOUND A FAILURE; see build-fuzz/fuzz_$t.log and build-fuzz/findings/" >&2
     tail -n 40 "build-fuzz/fuzz_$t.log" >&2

@@ -3,6 +3,8 @@
 #include <toml++/toml.h>
 
 #include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -23,8 +25,11 @@ std::string scalar_text(const toml::node& node, const std::string& file, const s
   if (auto s = node.value<std::string>()) return *s;
   if (node.is_integer()) return std::to_string(*node.value<int64_t>());
   if (node.is_floating_point()) {
-    std::string t = std::to_string(*node.value<double>());
-    return t;
+    // Shortest text that reads back as the same double (std::to_string
+    // would print 1e-7 as 0.000000).
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, *node.value<double>());
+    return std::string(buf, r.ptr);
   }
   if (node.is_boolean()) return *node.value<bool>() ? "true" : "false";
   throw InputError(file, "key '" + key + "': expected a string, number or boolean");
@@ -36,6 +41,15 @@ void add_table(const toml::table& table, const std::string& file, const fs::path
     std::string key(k.str());
     std::replace(key.begin(), key.end(), '_', '-');
     if (node.is_table()) continue;  // sections are handled by the caller
+    // A key becomes `--key`: anything but an option name (an empty key, a
+    // space, an '=') would reach the command line as something else.
+    const bool option_name =
+        !key.empty() && std::isalnum(static_cast<unsigned char>(key[0])) &&
+        std::all_of(key.begin(), key.end(),
+                    [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '-'; });
+    if (!option_name)
+      throw InputError(file, "line " + std::to_string(node.source().begin.line) + ": key " +
+                                 quote_token(key) + " is not an option name (letters, digits, '-' and '_')");
     auto emit = [&](const toml::node& value) {
       std::string text = scalar_text(value, file, key);
       if (value.is_boolean()) {

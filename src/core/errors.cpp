@@ -17,6 +17,23 @@ std::string stop_message(int signal, std::optional<int> last) {
 }
 }  // namespace
 
+std::string quote_token(std::string_view token) {
+  constexpr std::size_t kShown = 40;
+  std::string out = "'";
+  for (unsigned char c : token.substr(0, kShown)) {
+    if (c >= 0x20 && c < 0x7f) {
+      out += char(c);
+    } else {
+      constexpr char hex[] = "0123456789abcdef";
+      out += "\\x";
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  out += token.size() > kShown ? "...' (" + std::to_string(token.size()) + " characters)" : std::string("'");
+  return out;
+}
+
 InputError::InputError(const std::string& file, const std::string& message, std::optional<int> frame)
     : std::runtime_error(compose(file, message, frame)), file_(file), message_(message), frame_(frame) {}
 

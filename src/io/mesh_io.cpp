@@ -79,26 +79,6 @@ bool parse_double(std::string_view s, double& v) {
   return r.ec == std::errc() && r.ptr == s.data() + s.size();
 }
 
-/// A token of the file as an error message quotes it: at most 40 characters
-/// (a 5 MB number must not make a 5 MB message), bytes that are not
-/// printable ASCII escaped as \xHH.
-std::string quote_token(std::string_view token) {
-  constexpr std::size_t kShown = 40;
-  std::string out = "'";
-  for (unsigned char c : token.substr(0, kShown)) {
-    if (c >= 0x20 && c < 0x7f) {
-      out += char(c);
-    } else {
-      constexpr char hex[] = "0123456789abcdef";
-      out += "\\x";
-      out += hex[c >> 4];
-      out += hex[c & 15];
-    }
-  }
-  out += token.size() > kShown ? "...' (" + std::to_string(token.size()) + " characters)" : std::string("'");
-  return out;
-}
-
 /// Why `token` is not a double: out of range, or not a number at all.
 std::string number_problem(std::string_view token) {
   std::string_view s = token;

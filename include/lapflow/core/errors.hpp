@@ -6,8 +6,14 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace lapflow {
+
+/// A piece of an input file as an error message quotes it, in single quotes:
+/// at most 40 characters (a 5 MB number must not make a 5 MB message), bytes
+/// that are not printable ASCII escaped as \xHH.
+std::string quote_token(std::string_view token);
 
 /// Malformed or missing input. what() is one line naming the file, the frame
 /// when known, the element, and what is wrong:
