@@ -94,6 +94,8 @@ void run(const AtlasCommand& o) {
     j["threads"] = thread_count();
     j["charts"] = r.charts;
     j["utilization"] = r.utilization;
+    j["lost_to_gutters"] = r.lost_to_gutters;
+    j["lost_to_packing"] = r.lost_to_packing;
     j["chart_texels"] = atlas.texels.size();
     j["density_p95_low"] = r.density_p95_low;
     j["density_p95_high"] = r.density_p95_high;
@@ -115,7 +117,8 @@ void run(const AtlasCommand& o) {
     fmt::print("density         {:.1f} texels per metre ({:.3g} mm per texel){}\n", r.texels_per_metre,
                r.texels_per_metre > 0 ? 1000 / r.texels_per_metre : 0.0,
                r.packing_overflow ? "; gutter dropped: too many charts for this resolution" : "");
-    fmt::print("utilization     {:.1f}% ({} chart texels)\n", 100 * r.utilization, atlas.texels.size());
+    fmt::print("utilization     {:.1f}% ({} chart texels); lost to gutters {:.1f}%, lost to packing {:.1f}%\n",
+               100 * r.utilization, atlas.texels.size(), 100 * r.lost_to_gutters, 100 * r.lost_to_packing);
     fmt::print("texel density   95% of the area within [{:.3f}, {:.3f}] of the mean; {:.1f}% of the area in [0.8, 1.25]\n",
                r.density_p95_low, r.density_p95_high, 100 * r.area_in_density_bounds);
     fmt::print("flipped         {} triangles\n", r.flipped_triangles);

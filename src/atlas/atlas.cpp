@@ -103,7 +103,11 @@ SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& option
   atlas.chart_of_triangle = std::move(charts.chart_of_triangle);
   atlas.chart_count = charts.count;
   atlas.report.charts = charts.count;
-  atlas.report.utilization = double(atlas.texels.size()) / (double(options.resolution) * options.resolution);
+  const double texels = double(options.resolution) * options.resolution;
+  atlas.report.utilization = double(atlas.texels.size()) / texels;
+  const double claimed = double(std::max(packed.claimed_texels, atlas.texels.size()));
+  atlas.report.lost_to_gutters = (claimed - double(atlas.texels.size())) / texels;
+  atlas.report.lost_to_packing = 1 - claimed / texels;
   measure_density(mesh, info, atlas.corner_uv, atlas.report);
   return atlas;
 }

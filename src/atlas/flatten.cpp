@@ -124,8 +124,31 @@ bool flatten_one(const TriMesh& mesh, const TriangleInfo& info, const std::vecto
   return true;
 }
 
-/// Splits a chart at the median of its triangles along their principal axis,
-/// then into edge-connected parts. Degenerate triangles follow a proper
+/// Unit direction of the long side of the minimum-area rectangle around `pts`.
+Vec2 long_side(const std::vector<Vec2>& pts) {
+  const std::vector<Vec2> hull = convex_hull(pts);
+  if (hull.size() < 3) return hull.size() == 2 && norm(hull[1] - hull[0]) > 0 ? (hull[1] - hull[0]) / norm(hull[1] - hull[0]) : Vec2{1, 0};
+  double best = INFINITY;
+  Vec2 dir{1, 0};
+  for (std::size_t i = 0; i < hull.size(); ++i) {
+    const Vec2 e = hull[(i + 1) % hull.size()] - hull[i];
+    const double l = norm(e);
+    if (!(l > 0)) continue;
+    const Vec2 u = e / l, v{-u.y, u.x};
+    double ulo = INFINITY, uhi = -INFINITY, vlo = INFINITY, vhi = -INFINITY;
+    for (const Vec2& p : hull) {
+      ulo = std::min(ulo, dot(p, u)), uhi = std::max(uhi, dot(p, u));
+      vlo = std::min(vlo, dot(p, v)), vhi = std::max(vhi, dot(p, v));
+    }
+    const double area = (uhi - ulo) * (vhi - vlo);
+    if (area < best * (1 - 1e-12)) best = area, dir = (uhi - ulo) >= (vhi - vlo) ? u : v;
+  }
+  return dir;
+}
+
+/// Splits a chart at the median of its triangles along the long side of
+/// their minimum-area rectangle in the chart's best-fit plane, then into
+/// edge-connected parts. Degenerate triangles follow a proper
 /// triangle sharing a vertex. Parts are ordered by their lowest triangle.
 std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const TriangleInfo& info,
                                               const std::vector<int32_t>& tris) {
@@ -147,8 +170,18 @@ std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const Triangl
     cov += v * v.transpose();
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-  const Eigen::Vector3d ax = eig.eigenvectors().col(2);
-  const Vec3 axis{ax.x(), ax.y(), ax.z()};
+  const Eigen::Vector3d ax = eig.eigenvectors().col(2), ay = eig.eigenvectors().col(1);
+  // The cut runs across the long side of the centroids' minimum-area
+  // rectangle in the chart's plane, not across the principal axis: a near
+  // square face's principal axis can be its diagonal, and a diagonal cut
+  // through the grid of a fluid mesh leaves two saw-toothed triangles that
+  // pack badly (docs/atlas.md).
+  const Vec3 e1{ax.x(), ax.y(), ax.z()}, e2{ay.x(), ay.y(), ay.z()};
+  std::vector<Vec2> plane;
+  plane.reserve(proper.size());
+  for (int32_t t : proper) plane.push_back({dot(centroid(t) - mean, e1), dot(centroid(t) - mean, e2)});
+  const Vec2 d = long_side(plane);
+  const Vec3 axis = e1 * d.x + e2 * d.y;
   std::vector<std::pair<double, int32_t>> proj;
   proj.reserve(proper.size());
   for (int32_t t : proper) proj.emplace_back(dot(centroid(t) - mean, axis), t);

@@ -52,14 +52,25 @@ Charts segment_charts(const TriMesh& mesh, const TriangleInfo& info, const Chart
 std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, Charts& charts,
                                  double max_stretch, double max_chart_area);
 
+/// Convex hull of points, counter-clockwise, without repeated or collinear
+/// points (fewer than three points: the distinct ones).
+std::vector<Vec2> convex_hull(std::vector<Vec2> pts);
+
 struct PackResult {
   double texels_per_metre = 0;
   bool overflow = false;  ///< charts could not be separated by the gutter at this resolution
+  /// Texels within ceil(gutter / 2) (a square) of a chart's conservative
+  /// footprint: the charts' texels, their partly covered edge texels and
+  /// their half of the gutters.
+  std::size_t claimed_texels = 0;
 };
 /// Rotates each chart to its minimum-area bounding rectangle, scales all by one
-/// density (the largest that packs) and packs boxes padded by `margin` texels on
-/// every side into the N x N square. Rewrites corner_uv into atlas uv in [0,1].
-PackResult pack_charts(const Charts& charts, int resolution, int margin, std::vector<Vec2>& corner_uv);
+/// density (the largest that packs) and packs their footprints (every texel
+/// their triangles touch) into the N x N square, bottom-left with quarter
+/// turns, so that `gutter` empty texels separate any two charts (shared
+/// gutters) and ceil(gutter / 2) separate a chart from the square's edges.
+/// Rewrites corner_uv into atlas uv in [0,1].
+PackResult pack_charts(const Charts& charts, int resolution, int gutter, std::vector<Vec2>& corner_uv);
 
 /// Texels whose centre lies inside a chart triangle (ties on shared edges go to
 /// the lowest triangle index), sorted by texel index.

@@ -14,11 +14,14 @@ namespace lapflow {
 
 struct AtlasOptions {
   int resolution = 2048;    ///< atlas width = height in texels
-  /// Texels owned by every chart around its footprint (every texel its
-  /// triangles touch): footprints dilated by `gutter` never overlap, so two
-  /// charts are at least 2 * gutter texels apart and each can be dilated by
-  /// `gutter` texels. Dropped to 0 (report.packing_overflow) only when the
-  /// charts cannot be separated at this resolution at all.
+  /// Empty texels between any two charts, shared by the two: no texel
+  /// within `gutter` (8-neighbour steps) of a chart's footprint (every texel
+  /// its triangles touch) lies in another chart's footprint, and footprints
+  /// keep ceil(gutter / 2) texels from the atlas's edges. Dilating every
+  /// chart by `gutter` fills each gap from both sides: a texel within
+  /// floor(gutter / 2) of a chart's texels takes that chart's colour
+  /// (docs/atlas.md, "Gutter"). Dropped to 0 (report.packing_overflow) only
+  /// when the charts cannot be separated at this resolution at all.
   int gutter = 4;
   /// A chart is split and redone when more than 2% of its surface area (or 5%
   /// of its uv area) has a texel density outside [1/max_stretch, max_stretch]
@@ -38,6 +41,10 @@ struct TexelMap {
 struct AtlasReport {
   int charts = 0;
   double utilization = 0;       ///< chart texels / all texels
+  /// Share of the atlas within ceil(gutter / 2) of a chart's footprint but
+  /// not a chart texel: gutters and partly covered chart edges.
+  double lost_to_gutters = 0;
+  double lost_to_packing = 0;   ///< the rest: 1 - utilization - lost_to_gutters
   double density_p95_low = 0;   ///< texel-density quantiles (normalised by the area-weighted mean)
   double density_p95_high = 0;  ///<   that bound 95% of the surface area
   double area_in_density_bounds = 0;  ///< share of surface area with density in [0.8, 1.25]
