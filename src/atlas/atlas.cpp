@@ -14,6 +14,11 @@ namespace {
 /// No chart may exceed this share of the surface: a handful of huge charts
 /// leaves large empty corners in the square however they are packed.
 constexpr double kMinChartsForPacking = 32;
+/// Nor may a chart be longer (its minimum-area rectangle's long side, uv
+/// metres) than this share of the square root of the surface area: one
+/// long strip (a stream, a wave's crest) would set the one scale of every
+/// chart alone and leave most of the atlas empty.
+constexpr double kMaxChartLength = 0.25;
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point& t) {
@@ -88,7 +93,8 @@ SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& option
   double total_area = 0;
   for (double a : info.area) total_area += a;
   const double max_chart_area = total_area / kMinChartsForPacking;
-  atlas.corner_uv = atlas_detail::flatten_charts(mesh, info, charts, options.max_stretch, max_chart_area);
+  const double max_chart_length = kMaxChartLength * std::sqrt(total_area);
+  atlas.corner_uv = atlas_detail::flatten_charts(mesh, info, charts, options.max_stretch, max_chart_area, max_chart_length);
   atlas.report.seconds_lscm = seconds_since(clock);
 
   const atlas_detail::PackResult packed =

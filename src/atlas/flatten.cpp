@@ -146,6 +146,18 @@ Vec2 long_side(const std::vector<Vec2>& pts) {
   return dir;
 }
 
+/// Length of the long side of the minimum-area rectangle around a chart's uv.
+double uv_length(const std::vector<int32_t>& tris, const std::vector<Vec2>& corner_uv) {
+  std::vector<Vec2> pts;
+  pts.reserve(3 * tris.size());
+  for (int32_t t : tris)
+    for (int k = 0; k < 3; ++k) pts.push_back(corner_uv[3 * std::size_t(t) + k]);
+  const Vec2 u = long_side(pts), v{-u.y, u.x};
+  double lo = INFINITY, hi = -INFINITY, vlo = INFINITY, vhi = -INFINITY;
+  for (const Vec2& p : pts) lo = std::min(lo, dot(p, u)), hi = std::max(hi, dot(p, u)), vlo = std::min(vlo, dot(p, v)), vhi = std::max(vhi, dot(p, v));
+  return pts.empty() ? 0 : std::max(hi - lo, vhi - vlo);
+}
+
 /// Splits a chart at the median of its triangles along the long side of
 /// their minimum-area rectangle in the chart's best-fit plane, then into
 /// edge-connected parts. Degenerate triangles follow a proper
@@ -269,7 +281,7 @@ std::vector<std::vector<int32_t>> split_chart(const TriMesh& mesh, const Triangl
 }  // namespace
 
 std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, Charts& charts,
-                                 double max_stretch, double max_chart_area) {
+                                 double max_stretch, double max_chart_area, double max_chart_length) {
   std::vector<Vec2> corner_uv(3 * mesh.triangle_count());
   std::vector<std::vector<int32_t>> lists(charts.count);
   for (int c = 0; c < charts.count; ++c)
@@ -284,7 +296,8 @@ std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, 
       for (std::size_t i = b; i < e; ++i) {
         double area = 0;
         for (int32_t t : lists[pending[i]]) area += info.area[t];
-        ok[i] = area <= max_chart_area && flatten_one(mesh, info, lists[pending[i]], max_stretch, false, corner_uv);
+        ok[i] = area <= max_chart_area && flatten_one(mesh, info, lists[pending[i]], max_stretch, false, corner_uv) &&
+                uv_length(lists[pending[i]], corner_uv) <= max_chart_length;
       }
     }, 1);
     // Splits are computed in parallel, ids handed out in chart order.

@@ -43,14 +43,16 @@ Charts segment_charts(const TriMesh& mesh, const TriangleInfo& info, const Chart
 /// Flattens every chart with LSCM into chart-local uv (metres: each chart's
 /// area-weighted mean of sqrt(area3D / areaUV) is 1). A chart with a flipped
 /// triangle or with more than 2% of its area outside the density band
-/// [1/max_stretch, max_stretch] is split in two along its longest axis (then
-/// into connected parts) and redone until it passes; so is a chart larger
-/// than `max_chart_area` (square metres: few huge charts pack badly).
-/// Updates `charts`.
+/// [1/max_stretch, max_stretch] is split in two across the long side of its
+/// minimum-area rectangle (then into connected parts) and redone until it
+/// passes; so is a chart larger than `max_chart_area` (square metres: few
+/// huge charts pack badly) or longer than `max_chart_length` (the long side
+/// of its uv's minimum-area rectangle, metres: one long strip sets the scale
+/// of all). Updates `charts`.
 /// Returns corner uv, 3 per triangle. Degenerate triangles get a point (all
 /// three corners at the uv of one of their vertices in the chart).
 std::vector<Vec2> flatten_charts(const TriMesh& mesh, const TriangleInfo& info, Charts& charts,
-                                 double max_stretch, double max_chart_area);
+                                 double max_stretch, double max_chart_area, double max_chart_length);
 
 /// Convex hull of points, counter-clockwise, without repeated or collinear
 /// points (fewer than three points: the distinct ones).
