@@ -139,8 +139,9 @@ void add_atlas_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "atlas",
       "Atlas one mesh on its own: cut it into charts, flatten them (LSCM), pack them at one texel density,\n"
-      "and write the mesh with its atlas UVs as OBJ + MTL. Prints charts, utilization, texel-density spread\n"
-      "and seconds per stage. Works on any triangle mesh (PLY or OBJ), static ones included.");
+      "and write the mesh with its atlas UVs as OBJ + MTL. Prints the chart count, utilization (and what\n"
+      "gutters and packing lose), texel-density spread and seconds per stage. Works on any triangle mesh\n"
+      "(PLY or OBJ), static ones included.");
   cmd->add_option("mesh", o->mesh, "Input mesh (PLY or OBJ)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--out", o->out, "Output OBJ; the MTL is written beside it with the extension .mtl")->required();
   cmd->add_option("--resolution", o->atlas.resolution,
@@ -148,7 +149,8 @@ void add_atlas_command(CLI::App& app) {
                   "buffers (about 18 bytes per texel, 39 with --texels) do not fit --max-memory")
       ->check(CLI::Range(16, 65536))
       ->capture_default_str();
-  cmd->add_option("--gutter", o->atlas.gutter, "Empty texels kept around every chart")
+  cmd->add_option("--gutter", o->atlas.gutter,
+                  "Empty texels between two charts, shared by the two (G/2, rounded up, to the atlas's edges)")
       ->check(CLI::Range(0, 64))
       ->capture_default_str();
   cmd->add_option("--max-stretch", o->atlas.max_stretch,

@@ -254,7 +254,10 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                  "resolution whose buffers do not fit --max-memory is refused before the bake starts")
       ->capture_default_str()
       ->group("Atlas");
-  cmd.add_option("--gutter", o.atlas.gutter, "Empty texels around every chart")->capture_default_str()->group("Atlas");
+  cmd.add_option("--gutter", o.atlas.gutter,
+                 "Empty texels between two charts, shared by the two; colour is dilated into them")
+      ->capture_default_str()
+      ->group("Atlas");
   add_max_memory_option(cmd, o.max_memory,
                         "Before reading more than the first frame, the bake estimates its memory from the surface "
                         "area, --radius, --resolution and the exemplar's size (docs/robustness.md) and refuses (exit "

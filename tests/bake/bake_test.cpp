@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include "io_test_helpers.hpp"
 #include "lapflow/addons/demo_scene.hpp"
@@ -22,8 +23,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// A folder of its own per test name and per source tree: suites of two
+/// worktrees running at once on one machine must not bake into (and delete)
+/// each other's folders. The same tree reuses its folder, so runs do not pile
+/// up in the temp dir.
 fs::path fresh_dir(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + name);
+  const std::string tree = fmt::format("{:08x}", std::hash<std::string>{}(LAPFLOW_SOURCE_DIR) & 0xffffffffu);
+  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + tree + "_" + name);
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
