@@ -54,6 +54,7 @@ struct BakeCli {
   std::string frames, orientation = "random", exr_type = "half", compression = "rle", mode = "erosion";
   std::string keep_states = "2";
   bool no_remesh = false;
+  bool paper = false;
 };
 
 /// --keep-states: all, last (1), none (0) or a count.
@@ -87,6 +88,7 @@ void run_bake(BakeCli& c) {
       {"none", ExrCompression::None}, {"rle", ExrCompression::Rle}};
   o.exr.compression = compressions.at(c.compression);
   o.raster.mode = parse_raster_mode(c.mode);
+  if (c.paper) o.raster.use_paper_hole_filling();
   o.keep_states = parse_keep_states(c.keep_states);
   bake_with_progress(o);
 }
@@ -222,26 +224,39 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_option("--epsilon", o.raster.epsilon, "Erosion offset epsilon of the paper")
       ->capture_default_str()
       ->group("Erosion");
-  cmd.add_option("--small-hole", o.raster.small_hole,
-                 "Holes no wider than this times the radius are closed by the patches around them instead of a "
-                 "new patch (0 = a new patch for every hole)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0))
-      ->group("Erosion");
-  cmd.add_flag("--hold", o.raster.hold,
-               "Hysteresis of the erosion test where a patch won texels before, so a texel does not change hands "
-               "when only the atlas's sampling moved (docs/temporal.md; experimental)")
-      ->group("Erosion");
+  CLI::Option* small_hole =
+      cmd.add_option("--small-hole", o.raster.small_hole,
+                     "Holes no wider than this times the radius are closed by the patches around them instead of "
+                     "a new patch (0 = a new patch for every hole, as in the paper)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 1.0))
+          ->group("Erosion");
+  CLI::Option* hold =
+      cmd.add_flag("--hold,!--no-hold", o.raster.hold,
+                   "Hysteresis of the erosion test where a patch won texels before, so a texel does not change "
+                   "hands when only the atlas's sampling moved, and a patch at rest keeps its weights and the "
+                   "small holes it closed (on by default; --no-hold: the paper's memoryless test; "
+                   "docs/temporal.md)")
+          ->group("Erosion");
   cmd.add_option("--hold-margin", o.raster.hold_margin,
                  "Where a patch won texels before, its erosion test passes with w lower by this much")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0))
       ->group("Erosion");
-  cmd.add_option("--merge", o.raster.merge,
-                 "Retire a patch that won fewer texels than this fraction of pi r^2 when other patches keep every "
-                 "one of them (0 = only patches that won nothing retire, as in the paper)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0))
+  CLI::Option* merge =
+      cmd.add_option("--merge", o.raster.merge,
+                     "Retire a patch that won fewer texels than this fraction of pi r^2 when other patches keep "
+                     "every one of them (0 = only patches that won nothing retire, as in the paper)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 1.0))
+          ->group("Erosion");
+  cmd.add_flag("--paper", c.paper,
+               "The paper's hole filling and retirement as published, for comparisons: every hole a new patch, no "
+               "hysteresis, only patches that won nothing retire (= --small-hole 0 --no-hold --merge 0). The "
+               "population then grows on steady flow and a still liquid keeps churning (docs/temporal.md)")
+      ->excludes(small_hole)
+      ->excludes(hold)
+      ->excludes(merge)
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "
