@@ -151,6 +151,7 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->group("Input");
   cmd.add_flag("--allow-zero-velocity", o.allow_zero_velocity, "Accept meshes without velocity (a still texture)")
       ->group("Input");
+  cmd.add_flag("--units-ok", o.units_ok, units_ok_help("bake"))->group("Input");
   cmd.add_option("--velocity-band", o.velocity_band,
                  "Per-vertex velocity is sampled once per frame on voxels within N voxels of the surface and read "
                  "trilinearly; 0 = exact closest-point sampling everywhere (slower)")

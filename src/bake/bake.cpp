@@ -55,6 +55,7 @@ FrameSource frame_source(const BakeOptions& o) {
   source.velocity_grid = o.velocity_grid;
   source.min_speed = o.min_speed;
   source.allow_zero_velocity = o.allow_zero_velocity;
+  source.units_ok = o.units_ok;
   source.velocity_band = o.velocity_band;
   source.velocity_voxel = o.velocity_voxel;
   return source;

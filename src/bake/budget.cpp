@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/frame.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/memory.hpp"
 #include "lapflow/io/mesh_io.hpp"
@@ -88,12 +89,17 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
   s.first_mesh = meshes.path(frames.front());
-  TriMesh first;
+  MeshFile file;
   try {
-    first = read_mesh(s.first_mesh);
+    file = read_mesh_file(s.first_mesh);
   } catch (const InputError& e) {
     throw e.with_frame(frames.front());
   }
+  // Units first: a mesh in millimetres would otherwise be refused for the
+  // radius or memory it seems to need, a less helpful message. Every frame
+  // is checked again as the bake reads it (read_frame_input).
+  if (!o.units_ok) check_frame_units(s.first_mesh, frames.front(), file, o.velocity_vdb_pattern.empty());
+  const TriMesh& first = file.mesh;
   s.area = surface_area(first);
   s.triangles = first.triangle_count();
   s.vertices = first.vertex_count();

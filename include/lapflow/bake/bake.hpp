@@ -26,6 +26,10 @@ struct BakeOptions {
   double fps = 24;                        ///< dt = 1/fps seconds
   double min_speed = 0;                   ///< m/s: slower velocities count as zero
   bool allow_zero_velocity = false;       ///< accept a sequence with no velocity
+  /// Bake frames with sizes, speeds or property types no liquid has
+  /// (units_problems, io/mesh_io.hpp); else the first such frame is an
+  /// InputError naming the file and frame. Does not change the output.
+  bool units_ok = false;
   /// Per-vertex velocities are sampled once per frame on voxels of
   /// `velocity_voxel` mean edge lengths within `velocity_band` voxels of the
   /// surface, then read trilinearly (band 0 = an exact closest-point query

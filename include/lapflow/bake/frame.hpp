@@ -9,6 +9,7 @@
 #include <string>
 
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/mesh_io.hpp"
 #include "lapflow/raster/raster.hpp"
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/surface/surface_query.hpp"
@@ -24,6 +25,10 @@ struct FrameSource {
   std::string velocity_grid;         ///< grid name; tries vel, v, velocity when empty
   double min_speed = 0;              ///< m/s: slower velocities count as zero
   bool allow_zero_velocity = false;  ///< a mesh without velocity is still (else an InputError)
+  /// Accept a frame with sizes, speeds or property types no liquid has
+  /// (units_problems in io/mesh_io.hpp); else it is an InputError naming
+  /// the file and frame.
+  bool units_ok = false;
   /// Per-vertex velocities are sampled once per frame on voxels of
   /// `velocity_voxel` mean edge lengths within `velocity_band` voxels of the
   /// surface, then read trilinearly (band 0 = an exact closest-point query
@@ -68,7 +73,8 @@ struct FrameStats {
 
 /// A frame's input as read from disk: the mesh and, with a VDB pattern, the
 /// velocity grid. Checks the velocity rules of FrameSource (a missing
-/// velocity is an InputError naming the file unless allowed).
+/// velocity is an InputError naming the file unless allowed) and, unless
+/// FrameSource::units_ok, the units (check_frame_units).
 struct FrameInput {
   int number = 0;
   std::string path;                     ///< the mesh file
@@ -76,6 +82,14 @@ struct FrameInput {
   std::unique_ptr<VelocityGrid> grid;   ///< set with FrameSource::velocity_vdb_pattern
 };
 FrameInput read_frame_input(const FrameSource& source, int frame);
+
+/// Throws InputError naming `path` and `frame` when the frame has sizes,
+/// speeds or property types no liquid has (units_problems: every problem in
+/// the one line, which ends saying that --units-ok bakes anyway). The vertex
+/// velocities count when the velocity comes from them (`vertex_velocity`);
+/// a `grid` is sampled at the vertices the triangles use.
+void check_frame_units(const std::string& path, int frame, const MeshFile& file, bool vertex_velocity,
+                       const VelocityGrid* grid = nullptr);
 
 /// Everything about one frame. Members refer to each other (the surface
 /// query to the mesh, the velocity to both), so a Frame stays where it was
