@@ -4,6 +4,7 @@
 // reads. The thresholds are kMaxLiquidSize and kMaxLiquidSpeed.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -50,6 +51,14 @@ CliResult run(const TempDir& dir, const std::string& args) {
   CliResult r;
   r.code = test::run_command(lapflow_command(dir, args), &r.out, &r.err, dir);
   return r;
+}
+
+/// A VDB whose vector grid `vel` is `v` m/s everywhere (its background).
+void write_uniform_vdb(const std::string& path, const Vec3& v) {
+  openvdb::initialize();
+  auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(float(v.x), float(v.y), float(v.z)));
+  grid->setName("vel");
+  openvdb::io::File(path).write({grid});
 }
 
 std::size_t lines(const std::string& s) { return std::size_t(std::count(s.begin(), s.end(), '\n')); }
@@ -214,6 +223,29 @@ TEST(Units, BakeRefusesSuchAFrameUnlessUnitsOk) {
   r = run(dir, "bake --help");
   EXPECT_NE(r.out.find("--units-ok"), std::string::npos);
   EXPECT_NE(r.out.find("bounds more than 1 km across, a vertex faster than 1 km/s"), std::string::npos) << r.out;
+}
+
+TEST(Units, AVdbGridFasterThan1KmPerSecondIsWarnedAndRefused) {
+  TempDir dir("units");
+  // Vertex velocities of 0.5 m/s, a grid of 1500 m/s: the grid is what the
+  // bake would advect with.
+  test::write_bytes(dir / "m.0001.ply", tetra_ply(1.0));
+  write_uniform_vdb(dir / "v.0001.vdb", {0, 1500, 0});
+  CliResult r = run(dir, "inspect m.%04d.ply --velocity-vdb v.%04d.vdb --quiet");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("warning: m.0001.ply (frame 1): the VDB grid 'vel' at vertex 0 is 1.5e+03 m/s: over 1 km/s"),
+            std::string::npos)
+      << r.err;
+  r = run(dir, "bake --mesh m.%04d.ply --velocity-vdb v.%04d.vdb --exemplar pebbles --resolution 128 --radius 0.3 "
+               "--out out --quiet --threads 2");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("error: m.0001.ply (frame 1): the VDB grid 'vel' at vertex 0 is 1.5e+03 m/s"), std::string::npos)
+      << r.err;
+  // 900 m/s is fast, but not beyond what the check calls a liquid.
+  write_uniform_vdb(dir / "v.0001.vdb", {0, 900, 0});
+  r = run(dir, "bake --mesh m.%04d.ply --velocity-vdb v.%04d.vdb --exemplar pebbles --resolution 128 --radius 0.3 "
+               "--out out --quiet --threads 2");
+  EXPECT_EQ(r.code, 0) << r.err;
 }
 
 TEST(Units, ReadFrameInputChecksUnlessUnitsOk) {
