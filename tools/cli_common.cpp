@@ -10,6 +10,7 @@
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/memory.hpp"
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow::cli {
 
@@ -50,7 +51,24 @@ void add_global_options(CLI::App& cmd) {
   cmd.add_flag("--quiet,-q", g.quiet, "Print only warnings and errors");
 }
 
+void print_error(const std::string& message, const std::string& hint) {
+  const std::size_t room = lapflow::kMaxMessageChars > hint.size() + 40 ? lapflow::kMaxMessageChars - hint.size() : 40;
+  fmt::print(stderr, "error: {}{}\n", lapflow::printable_line(message, room), lapflow::printable_line(hint));
+}
+
 void apply_global_options() { set_thread_count(globals().threads); }
+
+std::string units_thresholds_text() {
+  return fmt::format("bounds more than {:g} km across, a vertex faster than {:g} km/s, or a position or velocity "
+                     "property declared with an integer PLY type (char, uchar, short, ushort, int, uint)",
+                     lapflow::kMaxLiquidSize / 1000, lapflow::kMaxLiquidSpeed / 1000);
+}
+
+std::string units_ok_help(const std::string& verb) {
+  return fmt::format("Also {} frames no liquid in metres has: {}. Without it such a frame is exit 2 naming the file "
+                     "and frame (lapflow inspect warns about them). Coordinates beyond {:g} km stay refused",
+                     verb, units_thresholds_text(), lapflow::kMaxMeshCoordinate / 1000);
+}
 
 Progress::Progress(std::string label, std::size_t total)
     : label_(std::move(label)), total_(total), tty_(::isatty(STDERR_FILENO)), start_(std::chrono::steady_clock::now()) {}

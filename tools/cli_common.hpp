@@ -10,6 +10,7 @@
 #include <string>
 
 #include "lapflow/bake/bake.hpp"
+#include "lapflow/core/errors.hpp"
 #include "lapflow/core/vec.hpp"
 
 namespace lapflow::cli {
@@ -33,6 +34,11 @@ CLI::Option* add_max_memory_option(CLI::App& cmd, std::size_t& bytes, const std:
 /// `--remesher lattice|isotropic|cgal` (the old names `grid` and `fast` are
 /// accepted too), shared by bake and patches.
 CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher);
+/// The help of `--units-ok` for a command that would `verb` such frames,
+/// with the thresholds (io/mesh_io.hpp).
+std::string units_ok_help(const std::string& verb);
+/// The thresholds of `lapflow inspect`'s warnings, for a help text.
+std::string units_thresholds_text();
 /// Applies --threads (call at the start of every command's callback).
 void apply_global_options();
 
@@ -41,10 +47,14 @@ template <typename... Args>
 void info(fmt::format_string<Args...> f, Args&&... args) {
   if (!globals().quiet) fmt::print(stderr, "{}\n", fmt::format(f, std::forward<Args>(args)...));
 }
-/// Warning to stderr (printed even with --quiet).
+/// "error: MESSAGE" on stderr, one printable line of at most about 300
+/// characters (lapflow::printable_line), whatever the message holds; a
+/// `hint` after it is never cut away.
+void print_error(const std::string& message, const std::string& hint = "");
+/// Warning to stderr (printed even with --quiet), one printable line.
 template <typename... Args>
 void warn(fmt::format_string<Args...> f, Args&&... args) {
-  fmt::print(stderr, "warning: {}\n", fmt::format(f, std::forward<Args>(args)...));
+  fmt::print(stderr, "warning: {}\n", lapflow::printable_line(fmt::format(f, std::forward<Args>(args)...)));
 }
 
 /// Frame progress: a bar with count and ETA on a terminal, plain lines
@@ -87,6 +97,8 @@ void add_demo_command(CLI::App& app);
 void add_atlas_command(CLI::App& app);
 void add_patches_command(CLI::App& app);
 void add_bake_command(CLI::App& app);
+void add_track_command(CLI::App& app);
+void add_render_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
 /// `lapflow preview DIR --width W --height H` with every other option at its default.
 void preview_bake(const std::string& dir, int width, int height);

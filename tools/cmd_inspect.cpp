@@ -41,6 +41,9 @@ struct FrameResult {
   SpeedStats grid_speed;    ///< from the VDB sampled at the vertices
   std::string grid_name;
   double grid_difference = -1;  ///< sum |v_grid - v_vertex| / sum |v_vertex|; -1 = not measured
+  /// Sizes, speeds and property types no liquid has (units_problems): a
+  /// bake refuses the frame unless --units-ok.
+  std::vector<std::string> warnings;
 };
 
 /// Speeds over the referenced vertices, with --min-speed applied (slower = 0).
@@ -67,13 +70,23 @@ SpeedStats speed_stats(const std::vector<Vec3>& v, const std::vector<uint8_t>& r
 void inspect_frame(const InspectOptions& o, const FramePattern& mesh_pattern, const std::optional<FramePattern>& vdb,
                    FrameResult& r) {
   r.file = mesh_pattern.path(r.frame);
-  const TriMesh m = read_mesh(r.file);
+  // Absurd bounds are read and reported here, not refused: the user runs
+  // inspect to find out what is wrong with the sequence.
+  const MeshFile file = read_mesh_file(r.file, false);
+  const TriMesh& m = file.mesh;
   r.report = analyze_mesh(m);
+  r.warnings = units_problems(m, file.declared);
+  bool sampleable = true;  // OpenVDB's index space overflows beyond kMaxMeshCoordinate
+  try {
+    check_mesh_bounds(m, r.file);
+  } catch (const InputError&) {
+    sampleable = false;
+  }
   std::vector<uint8_t> referenced(m.vertex_count(), 0);
   for (const Tri& f : m.triangles)
     for (int32_t x : f) referenced[x] = 1;
   if (m.has_velocities()) r.vertex_speed = speed_stats(m.velocities, referenced, o.min_speed);
-  if (!vdb) return;
+  if (!vdb || !sampleable) return;
   const VelocityGrid grid(vdb->path(r.frame), o.grid_name);
   r.grid_name = grid.grid_name();
   std::vector<Vec3> sampled(m.vertex_count());
@@ -82,6 +95,12 @@ void inspect_frame(const InspectOptions& o, const FramePattern& mesh_pattern, co
       if (referenced[i]) sampled[i] = grid.sample(m.positions[i]);
   });
   r.grid_speed = speed_stats(sampled, referenced, o.min_speed);
+  double fastest = 0;
+  std::size_t at = 0;
+  for (std::size_t i = 0; i < sampled.size(); ++i)
+    if (referenced[i] && norm(sampled[i]) > fastest) fastest = norm(sampled[i]), at = i;
+  if (!(fastest <= kMaxLiquidSpeed))
+    r.warnings.push_back(speed_problem(fastest, at, "the VDB grid '" + r.grid_name + "'"));
   if (m.has_velocities()) {
     double diff = 0, base = 0;
     for (std::size_t i = 0; i < sampled.size(); ++i) {
@@ -110,6 +129,9 @@ std::string frame_list(const std::vector<int>& frames) {
 
 std::string box_text(const Box3& b) {
   if (b.empty()) return "(empty)";
+  if (!(std::max(norm(b.lo), norm(b.hi)) < 1e6))  // 3e38 in full is 39 digits
+    return fmt::format("({:.3g}, {:.3g}, {:.3g}) - ({:.3g}, {:.3g}, {:.3g}) m", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y,
+                       b.hi.z);
   return fmt::format("({:.3f}, {:.3f}, {:.3f}) - ({:.3f}, {:.3f}, {:.3f}) m", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y,
                      b.hi.z);
 }
@@ -132,7 +154,7 @@ struct Summary {
   int tri_min_frame = 0, tri_max_frame = 0;
   double tri_mean = 0;
   std::size_t non_manifold_edges = 0, non_manifold_vertices = 0, degenerate = 0, boundary = 0, isolated = 0;
-  std::vector<int> frames_with_non_manifold, frames_with_boundary, frames_without_velocity;
+  std::vector<int> frames_with_non_manifold, frames_with_boundary, frames_without_velocity, frames_with_warnings;
   Box3 bounds;
   double peak_speed = 0;
   int peak_frame = 0;
@@ -159,6 +181,7 @@ Summary summarize(const std::vector<FrameResult>& results) {
     s.non_manifold_vertices += m.non_manifold_vertices;
     if (m.non_manifold_edges + m.non_manifold_vertices > 0) s.frames_with_non_manifold.push_back(r.frame);
     if (m.boundary_edges > 0) s.frames_with_boundary.push_back(r.frame);
+    if (!r.warnings.empty()) s.frames_with_warnings.push_back(r.frame);
     s.degenerate += m.degenerate_triangles;
     s.boundary += m.boundary_edges;
     s.isolated += m.isolated_vertices;
@@ -228,10 +251,39 @@ void print_summary(const InspectOptions& o, const std::vector<FrameResult>& resu
   if (s.mean_difference >= 0)
     fmt::print("  grid vs vertex    {:.1f}% mean relative difference (worst frame {}: {:.1f}%)\n",
                100 * s.mean_difference, s.worst_difference_frame, 100 * s.worst_difference);
+  fmt::print("  units             {}\n",
+             s.frames_with_warnings.empty()
+                 ? std::string("no size, speed or property type a liquid in metres could not have")
+                 : "WARNING in frames " + frame_list(s.frames_with_warnings) +
+                       " (see the warnings): a bake refuses them unless --units-ok");
+}
+
+/// "file (frame N): problem", as an error names a frame.
+std::string warning_text(const FrameResult& r, const std::string& problem) {
+  return InputError(r.file, problem, r.frame).what();
+}
+
+/// The units warnings on stderr, the first frames' in full: a sequence whose
+/// every frame is in millimetres must not bury the summary.
+void print_warnings(const std::vector<FrameResult>& results) {
+  constexpr std::size_t kFramesShown = 5;
+  std::size_t shown = 0, more = 0;
+  for (const FrameResult& r : results) {
+    if (r.warnings.empty()) continue;
+    if (shown == kFramesShown) {
+      ++more;
+      continue;
+    }
+    ++shown;
+    for (const std::string& w : r.warnings) warn("{}", warning_text(r, w));
+  }
+  if (more > 0) warn("{} more frames have such warnings (--json lists them all)", more);
 }
 
 nlohmann::json to_json(const InspectOptions& o, const std::vector<FrameResult>& results, const Summary& s) {
-  nlohmann::json frames = nlohmann::json::array();
+  nlohmann::json frames = nlohmann::json::array(), all_warnings = nlohmann::json::array();
+  for (const FrameResult& r : results)
+    for (const std::string& w : r.warnings) all_warnings.push_back(warning_text(r, w));
   for (const FrameResult& r : results) {
     nlohmann::json f = {{"frame", r.frame}, {"file", r.file}};
     if (r.error) {
@@ -243,7 +295,8 @@ nlohmann::json to_json(const InspectOptions& o, const std::vector<FrameResult>& 
                 {"boundary_edges", m.boundary_edges}, {"degenerate_triangles", m.degenerate_triangles},
                 {"isolated_vertices", m.isolated_vertices}, {"area", m.area}, {"bounds", box_json(m.bounds)},
                 {"empty", m.triangles == 0}, {"velocity_source", r.grid_speed.present ? "vdb" : (r.vertex_speed.present ? "vertex" : "none")},
-                {"speed", speed_json(used_speed(r))}, {"vertex_speed", speed_json(r.vertex_speed)}});
+                {"speed", speed_json(used_speed(r))}, {"vertex_speed", speed_json(r.vertex_speed)},
+                {"warnings", r.warnings}});
       if (r.grid_speed.present) {
         f["grid"] = {{"name", r.grid_name}, {"speed", speed_json(r.grid_speed)}};
         f["grid"]["relative_difference"] = r.grid_difference >= 0 ? nlohmann::json(r.grid_difference) : nlohmann::json(nullptr);
@@ -267,6 +320,8 @@ nlohmann::json to_json(const InspectOptions& o, const std::vector<FrameResult>& 
                             {"peak_speed", s.peak_speed},
                             {"peak_speed_frame", s.peak_frame},
                             {"frames_without_velocity", s.frames_without_velocity},
+                            {"frames_with_warnings", s.frames_with_warnings},
+                            {"warnings", all_warnings},
                             {"min_speed", o.min_speed}};
   if (s.mean_difference >= 0)
     summary["grid_relative_difference"] = {{"mean", s.mean_difference}, {"worst", s.worst_difference},
@@ -296,10 +351,10 @@ void run_inspect(const InspectOptions& o) {
       } catch (const InputError& err) {
         // One bad frame must not hide the others: record it, report all.
         r.error = std::make_exception_ptr(err.with_frame(r.frame));
-        r.error_text = err.with_frame(r.frame).what();
+        r.error_text = printable_line(err.with_frame(r.frame).what());
       } catch (const std::exception& err) {
         r.error = std::current_exception();
-        r.error_text = err.what();
+        r.error_text = printable_line(err.what());
       }
       std::lock_guard lock(progress_mutex);
       progress.step(fmt::format("frame {}", r.frame));
@@ -309,17 +364,20 @@ void run_inspect(const InspectOptions& o) {
 
   const Summary s = summarize(results);
   if (o.json) {
-    fmt::print("{}\n", to_json(o, results, s).dump(2));
+    // Invalid UTF-8 in a path would make dump() throw: replaced instead.
+    fmt::print("{}\n", to_json(o, results, s).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     print_table(results, vdb.has_value());
     print_summary(o, results, s);
   }
+  // Warnings do not change the exit code: inspect reports, the bake refuses.
+  print_warnings(results);
   // Exit code 2 when any frame is unreadable: print every error, in frame
   // order; main prints the last one as it propagates.
   std::vector<const FrameResult*> bad;
   for (const FrameResult& r : results)
     if (r.error) bad.push_back(&r);
-  for (std::size_t i = 0; i + 1 < bad.size(); ++i) fmt::print(stderr, "error: {}\n", bad[i]->error_text);
+  for (std::size_t i = 0; i + 1 < bad.size(); ++i) print_error(bad[i]->error_text);
   if (!bad.empty()) std::rethrow_exception(bad.back()->error);
 }
 
@@ -333,7 +391,8 @@ void add_inspect_command(CLI::App& app) {
       "components, non-manifold edges and vertices, boundary edges, degenerate triangles, the bounding box, and\n"
       "the velocity (min / mean / max speed over the surface) with where it comes from. Then a one-screen\n"
       "summary: frame range, triangle counts, totals of problems, empty frames, overall bounding box, peak speed.\n"
-      "Run it before a long bake. Nothing is written.");
+      "It warns about frames no liquid in metres has (see UNITS below), which a bake refuses. Run it before a\n"
+      "long bake. Nothing is written.");
   cmd->add_option("mesh", o.mesh_pattern,
                   "Mesh sequence pattern: name.%04d.ply, name.%d.ply, name.####.ply (one # per digit), "
                   "name.$F4.ply, name.$F.ply; or one file")
@@ -349,6 +408,14 @@ void add_inspect_command(CLI::App& app) {
   cmd->add_flag("--json", o.json, "Print one JSON document (per-frame reports and the summary) instead of the table");
   add_global_options(*cmd);
   cmd->footer(
+      "UNITS\n"
+      "  A warning (on stderr, 'warning: FILE (frame N): ...', and in the JSON's 'warnings' lists) for\n"
+      "  " + units_thresholds_text() + ":\n"
+      "  a mesh in millimetres, a corrupt file or a float written as an integer. The exit code stays 0;\n"
+      "  `lapflow bake` refuses such a frame (exit 2) unless --units-ok, and coordinates beyond " +
+      fmt::format("{:g} km", kMaxMeshCoordinate / 1000) + "\n"
+      "  even with it.\n"
+      "\n"
       "INPUT FORMATS\n"
       "  PLY (binary little or big endian, ASCII) and OBJ, one file per frame. Polygons are split into\n"
       "  triangles. Velocity per vertex from PLY properties vx vy vz, velocity_x/_y/_z or v_x/_y/_z (float or\n"
@@ -361,7 +428,7 @@ void add_inspect_command(CLI::App& app) {
       "  'grid-vs-vertex' is sum|v_vdb - v_vertex| / sum|v_vertex| over the frame's vertices.\n"
       "\n"
       "EXIT CODES\n"
-      "  0  every frame was read (empty frames included)\n"
+      "  0  every frame was read (empty frames and frames with warnings included)\n"
       "  2  bad input or usage: a missing frame in --frames, a malformed file (one line per file naming\n"
       "     the frame, the element and what is wrong), a VDB without the grid; all frames are still reported\n"
       "  1  internal error\n"

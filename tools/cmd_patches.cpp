@@ -158,6 +158,7 @@ void add_patches_command(CLI::App& app) {
   cmd->add_option("--velocity-grid", c->source.velocity_grid, "Grid name in the VDB files (default: vel, v, velocity)");
   cmd->add_flag("--allow-zero-velocity", c->source.allow_zero_velocity,
                 "Accept meshes without velocity (patches then only follow the surface by projection)");
+  cmd->add_flag("--units-ok", c->source.units_ok, units_ok_help("seed and advect"));
   cmd->add_option("--velocity-band", c->source.velocity_band,
                   "Per-vertex velocity sampled on a band of this many voxels around the surface, as in the bake (0 = "
                   "exact closest-point sampling)")

@@ -35,6 +35,8 @@ int main(int argc, char** argv) {
   cli::add_atlas_command(app);
   cli::add_patches_command(app);
   cli::add_bake_command(app);
+  cli::add_track_command(app);
+  cli::add_render_command(app);
   cli::add_eval_command(app);
   cli::add_preview_command(app);
   cli::add_feature_map_command(app);
@@ -46,25 +48,29 @@ int main(int argc, char** argv) {
     std::reverse(args.begin(), args.end());  // CLI11 takes the vector in reverse order
     app.parse(args);
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);
-    return code == 0 ? cli::kOk : cli::kBadInput;
+    // --help and --version print as CLI11 does; a parse error is one line
+    // like every other error (CLI11 adds a second, and echoes the argument
+    // in full, whatever its length or bytes).
+    if (e.get_exit_code() == 0) return app.exit(e) == 0 ? cli::kOk : cli::kBadInput;
+    cli::print_error(e.what(), " (--help lists the options)");
+    return cli::kBadInput;
   } catch (const InputError& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    cli::print_error(e.what());
     return cli::kBadInput;
   } catch (const UsageError& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    cli::print_error(e.what());
     return cli::kBadInput;
   } catch (const OutputError& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    cli::print_error(e.what());
     return cli::kBadInput;
   } catch (const Interrupted& e) {
-    fmt::print(stderr, "lapflow: {}\n", e.what());
+    fmt::print(stderr, "lapflow: {}\n", printable_line(e.what()));
     return 128 + e.signal();
   } catch (const std::bad_alloc&) {
-    fmt::print(stderr, "error: out of memory\n");
+    cli::print_error("out of memory");
     return cli::kInternal;
   } catch (const std::exception& e) {
-    fmt::print(stderr, "error: {}\n", e.what());
+    cli::print_error(e.what());
     return cli::kInternal;
   }
   return cli::kOk;

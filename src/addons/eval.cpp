@@ -215,6 +215,7 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
   source.velocity_vdb_pattern = m.velocity_vdb_pattern;
   source.velocity_grid = m.velocity_grid;
   source.allow_zero_velocity = true;  // eval reads what the bake accepted; no velocity is zero velocity
+  source.units_ok = true;             // the same: the bake decided (--units-ok)
   FrameInput in = read_frame_input(source, frame);
   if (in.grid) {
     f.grid = std::move(in.grid);

@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/frame.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/memory.hpp"
 #include "lapflow/io/mesh_io.hpp"
@@ -88,12 +89,17 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
   s.first_mesh = meshes.path(frames.front());
-  TriMesh first;
+  MeshFile file;
   try {
-    first = read_mesh(s.first_mesh);
+    file = read_mesh_file(s.first_mesh);
   } catch (const InputError& e) {
     throw e.with_frame(frames.front());
   }
+  // Units first: a mesh in millimetres would otherwise be refused for the
+  // radius or memory it seems to need, a less helpful message. Every frame
+  // is checked again as the bake reads it (read_frame_input).
+  if (!o.units_ok) check_frame_units(s.first_mesh, frames.front(), file, o.velocity_vdb_pattern.empty());
+  const TriMesh& first = file.mesh;
   s.area = surface_area(first);
   s.triangles = first.triangle_count();
   s.vertices = first.vertex_count();
@@ -142,13 +148,17 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   // With background writing one more frame of images waits for the disk.
   if (o.background_write) e.atlas += n2 * (16 + 4 + (o.aov ? kAovTexelBytes : 0));
 
+  // The tracking atlas: its index and chart buffers, no image.
+  const double nt = double(tracking_resolution(area, r, o.track_texel));
+  e.tracking = nt * nt * (4 + kUtilization * kChartTexelBytes);
+
   e.meshes = kFramesInFlight * kTriangleBytes * double(s.triangles) * s.growth;
 
   const double pixels = double(s.color.width) * double(s.color.height);
   e.exemplar = s.color.decoded_bytes() + s.feature.decoded_bytes() + s.displacement.decoded_bytes() +
                pixels * kExemplarPixelBytes;
   e.base = kBaseBytes;
-  e.total = e.atlas + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
+  e.total = e.atlas + e.tracking + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
   return e;
 }
 
@@ -176,6 +186,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
   };
   const Part parts[] = {
       {e.atlas, fmt::format("--resolution {}: {} of atlas buffers", o.atlas.resolution, format_bytes(e.atlas))},
+      {e.tracking, fmt::format("--track-texel {:.3g} at --radius {:.3g} m: a {}x{} tracking atlas, {}", o.track_texel,
+                               o.patch.radius, tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
+                               tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
+                               format_bytes(e.tracking))},
       {e.patch_bytes + e.seeding,
        fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {}",
                    radius, e.patches, e.vertices_per_patch, o.seeding.spacing, o.patch.remesh_edge,

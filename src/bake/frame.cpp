@@ -1,17 +1,46 @@
 // Reading a frame and its velocity, the same way for every command.
 #include "lapflow/bake/frame.hpp"
 
+#include <algorithm>
+
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow {
+
+void check_frame_units(const std::string& path, int frame, const MeshFile& file, bool vertex_velocity,
+                       const VelocityGrid* grid) {
+  std::vector<std::string> problems = units_problems(file.mesh, file.declared, vertex_velocity);
+  if (grid && !file.mesh.empty()) {
+    // The speeds the bake will advect with, where the surface is.
+    const TriMesh& m = file.mesh;
+    std::vector<uint8_t> used(m.vertex_count(), 0);
+    for (const Tri& t : m.triangles)
+      for (int32_t v : t) used[std::size_t(v)] = 1;
+    std::vector<double> speed(m.vertex_count(), 0);
+    parallel_for(speed.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v)
+        if (used[v]) speed[v] = norm(grid->sample(m.positions[v]));
+    }, 4096);
+    const auto fastest = std::max_element(speed.begin(), speed.end());
+    if (fastest != speed.end() && !(*fastest <= kMaxLiquidSpeed))
+      problems.push_back(speed_problem(*fastest, std::size_t(fastest - speed.begin()),
+                                       "the VDB grid '" + grid->grid_name() + "'"));
+  }
+  if (problems.empty()) return;
+  std::string what;
+  for (const std::string& p : problems) what += (what.empty() ? "" : "; ") + p;
+  throw InputError(path, what + " (--units-ok to bake anyway)", frame);
+}
 
 FrameInput read_frame_input(const FrameSource& source, int frame) {
   FrameInput in;
   in.number = frame;
   in.path = FramePattern(source.mesh_pattern).path(frame);
+  MeshFile file;
   try {
-    in.mesh = read_mesh(in.path);
+    file = read_mesh_file(in.path);
   } catch (const InputError& e) {
     throw e.with_frame(frame);
   }
@@ -22,12 +51,14 @@ FrameInput read_frame_input(const FrameSource& source, int frame) {
     } catch (const InputError& e) {
       throw e.with_frame(frame);
     }
-  } else if (!in.mesh.has_velocities() && !in.mesh.empty() && !source.allow_zero_velocity) {
+  } else if (!file.mesh.has_velocities() && !file.mesh.empty() && !source.allow_zero_velocity) {
     throw InputError(in.path,
                      "no per-vertex velocity (vx vy vz) and no --velocity-vdb; pass --allow-zero-velocity to bake a "
                      "still texture",
                      frame);
   }
+  if (!source.units_ok) check_frame_units(in.path, frame, file, !in.grid, in.grid.get());
+  in.mesh = std::move(file.mesh);
   return in;
 }
 

@@ -4,14 +4,18 @@
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imageio.h>
 #include <immintrin.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
 #include <cstdlib>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
+#include <mutex>
 
 #include <fmt/format.h>
 
@@ -35,6 +39,92 @@ std::string one_line(std::string s) {
       out += c;
   }
   return out.empty() ? std::string("unknown OpenImageIO error") : out;
+}
+
+// libpng's own chatter. OIIO 2.4's PNG plugin gives libpng an error handler
+// that records the message for geterror() and returns; libpng then calls its
+// default handler, which prints "libpng error: MESSAGE" to stderr before it
+// longjmps (png_error in pngerror.c). OIIO has no attribute for it and never
+// lets us at the png_struct, so while libpng works, file descriptor 2 goes
+// to a temporary file: the "libpng ..." lines are dropped or folded into
+// lapflow's own one-line message (OIIO's text already holds the same
+// message), anything else is printed as it came. One capture at a time, and
+// only around PNG files.
+class LibpngChatter {
+ public:
+  explicit LibpngChatter(bool png) {
+    if (!png) return;
+    lock_ = std::unique_lock(mutex());
+    std::fflush(stderr);
+    file_ = std::tmpfile();
+    saved_ = file_ ? ::dup(STDERR_FILENO) : -1;
+    if (saved_ < 0 || ::dup2(::fileno(file_), STDERR_FILENO) < 0) restore();
+  }
+  ~LibpngChatter() { finish(); }
+  LibpngChatter(const LibpngChatter&) = delete;
+  LibpngChatter& operator=(const LibpngChatter&) = delete;
+
+  /// Stops capturing; returns libpng's lines joined by "; " (and prints
+  /// whatever else was written meanwhile).
+  std::string finish() {
+    if (!file_) return "";
+    std::fflush(stderr);
+    restore();
+    std::string text, chatter, other;
+    char buf[4096];
+    std::rewind(file_);
+    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, file_)) > 0;) text.append(buf, n);
+    std::fclose(file_);
+    file_ = nullptr;
+    for (std::size_t b = 0; b < text.size();) {
+      std::size_t e = text.find('\n', b);
+      if (e == std::string::npos) e = text.size();
+      const std::string line = text.substr(b, e - b);
+      if (line.rfind("libpng ", 0) == 0)
+        chatter += (chatter.empty() ? "" : "; ") + line;
+      else if (!line.empty())
+        other += line + "\n";
+      b = e + 1;
+    }
+    if (!other.empty()) std::fputs(other.c_str(), stderr);
+    if (lock_.owns_lock()) lock_.unlock();
+    return chatter;
+  }
+
+ private:
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  void restore() {
+    if (saved_ >= 0) {
+      ::dup2(saved_, STDERR_FILENO);
+      ::close(saved_);
+      saved_ = -1;
+    }
+  }
+
+  std::unique_lock<std::mutex> lock_;
+  std::FILE* file_ = nullptr;
+  int saved_ = -1;
+};
+
+// Whether the file at `path` is a PNG (the 8-byte signature): the only
+// reader whose library prints on its own (LibpngChatter).
+bool is_png_file(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char sig[8] = {};
+  return f.read(sig, 8) && std::string_view(sig, 8) == std::string_view("\x89PNG\r\n\x1a\n", 8);
+}
+
+// OIIO's message for a failed read, with libpng's own line when it says
+// something OIIO's does not.
+std::string read_failure(const std::string& library_text, const std::string& chatter) {
+  std::string text = one_line(library_text);
+  const std::string prefix = "libpng error: ";
+  const std::string said = chatter.rfind(prefix, 0) == 0 ? chatter.substr(prefix.size()) : chatter;
+  if (!said.empty() && text.find(said) == std::string::npos) text += " (" + chatter + ")";
+  return text;
 }
 
 std::string lower(std::string s) {
@@ -127,13 +217,18 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
   auto out = OIIO::ImageOutput::create(tmp);
   if (!out) throw OutputError(path + ": " + one_line(OIIO::geterror()));
   out->threads(thread_count());
+  // libpng prints "libpng error: Write Error" on a full disk, as when reading.
+  LibpngChatter chatter(std::string(out->format_name()) == "png");
   if (!out->open(tmp, spec)) throw OutputError(path + ": cannot open for writing: " + one_line(out->geterror()));
   if (!out->write_image(data_type, data)) {
     const std::string err = one_line(out->geterror());
     out->close();
+    chatter.finish();
     throw write_failure(path, tmp, err);
   }
-  if (!out->close()) throw write_failure(path, tmp, one_line(out->geterror()));
+  const bool closed = out->close();
+  chatter.finish();
+  if (!closed) throw write_failure(path, tmp, one_line(out->geterror()));
 }
 
 // float -> half, round to nearest even (what Imath::half and OIIO's own
@@ -178,8 +273,10 @@ std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
   // colour): exemplars drop alpha, and sRGB decoding needs the unscaled value.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
+  LibpngChatter chatter(is_png_file(path));
   auto in = OIIO::ImageInput::open(path, &config);
-  if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
+  const std::string said = chatter.finish();
+  if (!in) throw InputError(path, "cannot read image: " + read_failure(OIIO::geterror(), said));
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw InputError(path, "image has no pixels");
@@ -209,8 +306,10 @@ Image read_image(const std::string& path, ColorSpace space, std::size_t max_byte
                                        max_bytes > 0 ? "the memory budget (--max-memory) of " + format_bytes(double(limit))
                                                      : "this machine's " + format_bytes(double(limit))));
   Image img(spec.width, spec.height, spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
-    throw InputError(path, "cannot read image: " + one_line(in->geterror()));
+  LibpngChatter chatter(is_png_file(path));
+  const bool read = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data());
+  const std::string said = chatter.finish();
+  if (!read) throw InputError(path, "cannot read image: " + read_failure(in->geterror(), said));
   in->close();
   for (float v : img.pixels)
     if (!std::isfinite(v)) throw InputError(path, "image contains NaN or infinite values");
@@ -229,8 +328,10 @@ Image read_image(const std::string& path, ColorSpace space, std::size_t max_byte
 }
 
 std::vector<std::string> image_channel_names(const std::string& path) {
+  LibpngChatter chatter(is_png_file(path));
   auto in = OIIO::ImageInput::open(path);
-  if (!in) throw InputError(path, "cannot read image: " + one_line(OIIO::geterror()));
+  const std::string said = chatter.finish();
+  if (!in) throw InputError(path, "cannot read image: " + read_failure(OIIO::geterror(), said));
   return in->spec().channelnames;
 }
 

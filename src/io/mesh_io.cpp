@@ -120,6 +120,7 @@ bool is_integer(Scalar t) { return t != Scalar::f32 && t != Scalar::f64; }
 struct PlyProperty {
   std::string name;
   Scalar type = Scalar::f32;
+  std::string type_word;  ///< the type as the header spells it ("int", "int32"), for warnings
   bool is_list = false;
   Scalar count_type = Scalar::u8;
 };
@@ -165,7 +166,7 @@ PlyHeader parse_ply_header(const std::string& path, const std::string& data) {
       if (w[1] == "ascii") h.format = PlyFormat::ascii;
       else if (w[1] == "binary_little_endian") h.format = PlyFormat::binary_le;
       else if (w[1] == "binary_big_endian") h.format = PlyFormat::binary_be;
-      else throw bad("unknown format '" + std::string(w[1]) + "' (ascii, binary_little_endian or binary_big_endian)");
+      else throw bad("unknown format " + quote_token(w[1]) + " (ascii, binary_little_endian or binary_big_endian)");
       have_format = true;
     } else if (w[0] == "element") {
       if (w.size() != 3) throw bad("expected 'element <name> <count>'");
@@ -173,7 +174,7 @@ PlyHeader parse_ply_header(const std::string& path, const std::string& data) {
       e.name = std::string(w[1]);
       const auto r = std::from_chars(w[2].data(), w[2].data() + w[2].size(), e.count);
       if (r.ec != std::errc() || r.ptr != w[2].data() + w[2].size())
-        throw bad("element '" + e.name + "' has an invalid count '" + std::string(w[2]) + "'");
+        throw bad("element " + quote_token(e.name) + " has an invalid count " + quote_token(w[2]));
       h.elements.push_back(std::move(e));
     } else if (w[0] == "property") {
       if (h.elements.empty()) throw bad("'property' before any 'element'");
@@ -181,18 +182,20 @@ PlyHeader parse_ply_header(const std::string& path, const std::string& data) {
       if (w.size() >= 2 && w[1] == "list") {
         if (w.size() != 5) throw bad("expected 'property list <count type> <item type> <name>'");
         p.is_list = true;
-        if (!parse_scalar(w[2], p.count_type)) throw bad("unknown type '" + std::string(w[2]) + "'");
+        if (!parse_scalar(w[2], p.count_type)) throw bad("unknown type " + quote_token(w[2]));
         if (!is_integer(p.count_type)) throw bad("list count type must be an integer type");
-        if (!parse_scalar(w[3], p.type)) throw bad("unknown type '" + std::string(w[3]) + "'");
+        if (!parse_scalar(w[3], p.type)) throw bad("unknown type " + quote_token(w[3]));
+        p.type_word = std::string(w[3]);
         p.name = std::string(w[4]);
       } else {
         if (w.size() != 3) throw bad("expected 'property <type> <name>'");
-        if (!parse_scalar(w[1], p.type)) throw bad("unknown type '" + std::string(w[1]) + "'");
+        if (!parse_scalar(w[1], p.type)) throw bad("unknown type " + quote_token(w[1]));
+        p.type_word = std::string(w[1]);
         p.name = std::string(w[2]);
       }
       h.elements.back().props.push_back(std::move(p));
     } else {
-      throw bad("unexpected keyword '" + std::string(w[0]) + "'");
+      throw bad("unexpected keyword " + quote_token(w[0]));
     }
   }
   if (!have_format) throw InputError(path, "PLY header has no 'format' line");
@@ -256,12 +259,12 @@ class PlyData {
   }
 
   [[noreturn]] void truncated() const {
-    throw InputError(path_, "file truncated: data ends in " + *element_ + " " + std::to_string(index_) + " of " +
+    throw InputError(path_, "file truncated: data ends in " + element_label() + " " + std::to_string(index_) + " of " +
                                 std::to_string(count_) + " (the header promises more than the file holds)");
   }
 
   std::string where() const {
-    std::string s = *element_ + " " + std::to_string(index_);
+    std::string s = element_label() + " " + std::to_string(index_);
     if (ascii_) s = "line " + std::to_string(line_) + " (" + s + ")";
     return s;
   }
@@ -302,8 +305,18 @@ class PlyData {
     while (p_ < end_ && !is_space(*p_)) ++p_;
     double v;
     if (!parse_double(std::string_view(b, std::size_t(p_ - b)), v))
-      throw InputError(path_, where() + ": '" + std::string(b, std::min<std::size_t>(p_ - b, 40)) + "' is not a number");
+      throw InputError(path_, where() + ": " + quote_token(std::string_view(b, std::size_t(p_ - b))) + " is not a number");
     return v;
+  }
+
+  /// The element's name as the header spells it when that is a plain word
+  /// ("vertex"), else quoted: a name of raw bytes (a NUL would end the
+  /// message) or a megabyte long.
+  std::string element_label() const {
+    const bool plain = element_->size() <= 40 && std::all_of(element_->begin(), element_->end(), [](char c) {
+      return c > 0x20 && c < 0x7f;
+    });
+    return plain ? *element_ : quote_token(*element_);
   }
 
   const std::string& path_;
@@ -352,7 +365,7 @@ std::vector<int> vertex_slots(const std::string& path, const PlyElement& e, bool
   return slot;
 }
 
-TriMesh read_ply(const std::string& path, const std::string& data) {
+TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo* declared) {
   const PlyHeader h = parse_ply_header(path, data);
   PlyData in(path, data, h);
   TriMesh m;
@@ -364,6 +377,14 @@ TriMesh read_ply(const std::string& path, const std::string& data) {
       if (e.count > uint64_t(INT32_MAX)) throw InputError(path, "PLY has more vertices than lapflow supports (2^31)");
       bool has_velocity = false;
       const std::vector<int> slot = vertex_slots(path, e, has_velocity);
+      if (declared) {
+        for (int want = 0; want < 6; ++want)
+          for (std::size_t k = 0; k < slot.size(); ++k)
+            if (slot[k] == want) {
+              const PlyProperty& p = e.props[k];
+              (want < 3 ? declared->positions : declared->velocities).push_back({p.name, p.type_word, is_integer(p.type)});
+            }
+      }
       // Never trust the count for allocation beyond what the file can hold.
       const std::size_t cap = std::min<uint64_t>(e.count, data.size());
       m.positions.reserve(cap);
@@ -585,35 +606,100 @@ UvMesh read_uv_mesh(const std::string& path) {
   return read_uv_mesh_from_memory(load_file(path), path);
 }
 
+namespace {
+/// Largest distance of a used vertex from the origin along an axis (m).
+double mesh_reach(const TriMesh& mesh) {
+  const Box3 b = bounding_box(mesh);
+  return std::max({std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x), std::abs(b.hi.y),
+                   std::abs(b.hi.z)});
+}
+}  // namespace
+
 void check_mesh_bounds(const TriMesh& mesh, const std::string& path) {
   if (mesh.empty()) return;
   const Box3 b = bounding_box(mesh);
-  const double reach = std::max({std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x),
-                                 std::abs(b.hi.y), std::abs(b.hi.z)});
+  const double reach = mesh_reach(mesh);
   if (!(reach <= kMaxMeshCoordinate))
     throw InputError(path, fmt::format("mesh bounds {:.3g} m: are the units metres? (bounds ({:.3g}, {:.3g}, {:.3g}) - "
                                        "({:.3g}, {:.3g}, {:.3g}); lapflow refuses coordinates beyond {:.0e} m)",
                                        reach, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z, kMaxMeshCoordinate));
 }
 
-TriMesh read_mesh_from_memory(const std::string& data, const std::string& path) {
+namespace {
+
+TriMesh parse_mesh(const std::string& data, const std::string& path, MeshFileInfo* declared) {
   const std::string ext = lower(fs::path(path).extension().string());
-  TriMesh mesh;
-  if (ext == ".ply") {
-    mesh = read_ply(path, data);
-  } else if (ext == ".obj") {
-    mesh = read_obj(path, data);
-  } else if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r')) {
-    // Unknown extension: trust the content when it says PLY.
-    mesh = read_ply(path, data);
-  } else {
-    throw InputError(path, "unknown mesh format '" + ext + "' (lapflow reads .ply and .obj)");
-  }
+  if (ext == ".ply") return read_ply(path, data, declared);
+  if (ext == ".obj") return read_obj(path, data);
+  // Unknown extension: trust the content when it says PLY.
+  if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r'))
+    return read_ply(path, data, declared);
+  throw InputError(path, "unknown mesh format " + quote_token(ext) + " (lapflow reads .ply and .obj)");
+}
+
+}  // namespace
+
+TriMesh read_mesh_from_memory(const std::string& data, const std::string& path) {
+  TriMesh mesh = parse_mesh(data, path, nullptr);
   check_mesh_bounds(mesh, path);
   return mesh;
 }
 
-TriMesh read_mesh(const std::string& path) { return read_mesh_from_memory(load_file(path), path); }
+MeshFile read_mesh_file(const std::string& path, bool check_bounds) {
+  MeshFile f;
+  f.mesh = parse_mesh(load_file(path), path, &f.declared);
+  if (check_bounds) check_mesh_bounds(f.mesh, path);
+  return f;
+}
+
+TriMesh read_mesh(const std::string& path) { return read_mesh_file(path).mesh; }
+
+std::vector<std::string> units_problems(const TriMesh& mesh, const MeshFileInfo& declared, bool check_velocity) {
+  std::vector<std::string> problems;
+  if (!mesh.empty()) {
+    const Vec3 size = bounding_box(mesh).size();
+    const double across = std::max({size.x, size.y, size.z});
+    if (!(across <= kMaxLiquidSize))
+      problems.push_back(fmt::format("mesh bounds {:.3g} m across: over {:g} km, are the units metres?", across,
+                                     kMaxLiquidSize / 1000));
+    const double reach = mesh_reach(mesh);
+    if (!(reach <= kMaxMeshCoordinate))
+      problems.push_back(fmt::format("a vertex {:.3g} m from the origin: a bake refuses coordinates beyond {:.0e} m, "
+                                     "even with --units-ok",
+                                     reach, kMaxMeshCoordinate));
+    if (check_velocity && mesh.has_velocities()) {
+      std::vector<uint8_t> used(mesh.vertex_count(), 0);
+      for (const Tri& t : mesh.triangles)
+        for (int32_t v : t) used[std::size_t(v)] = 1;
+      double fastest = 0;
+      std::size_t at = 0;
+      for (std::size_t v = 0; v < used.size(); ++v)
+        if (used[v] && norm(mesh.velocities[v]) > fastest) fastest = norm(mesh.velocities[v]), at = v;
+      if (!(fastest <= kMaxLiquidSpeed)) problems.push_back(speed_problem(fastest, at, "the vertex velocity"));
+    }
+  }
+  // A type is a statement about the whole file, empty frame or not. Names
+  // and types are words the reader knows (x, vx, int, uint8...).
+  auto integer_types = [](const std::vector<MeshFileInfo::Property>& props) {
+    std::string list;
+    for (const MeshFileInfo::Property& p : props)
+      if (p.integer) list += (list.empty() ? "" : ", ") + p.name + " " + p.type;
+    return list;
+  };
+  if (const std::string list = integer_types(declared.positions); !list.empty())
+    problems.push_back("PLY position properties declared as integers (" + list +
+                       "): an integer cannot hold a liquid surface's sub-millimetre coordinates (float or double "
+                       "expected)");
+  if (const std::string list = integer_types(declared.velocities); check_velocity && !list.empty())
+    problems.push_back("PLY velocity properties declared as integers (" + list +
+                       "): an integer cannot hold velocities in m/s finer than 1 m/s (float or double expected)");
+  return problems;
+}
+
+std::string speed_problem(double speed, std::size_t vertex, const std::string& source) {
+  return fmt::format("{} at vertex {} is {:.3g} m/s: over {:g} km/s, are the velocities in m/s?", source, vertex,
+                     speed, kMaxLiquidSpeed / 1000);
+}
 
 void write_ply(const std::string& path, const TriMesh& m) {
   const bool vel = m.has_velocities();

@@ -9,6 +9,7 @@
 #include <array>
 #include <atomic>
 #include <climits>
+#include <cstdint>
 #include <cmath>
 #include <stdexcept>
 
@@ -71,6 +72,15 @@ inline double weight_slope(const Vec2 uv[3], const float w[3]) {
   const double dw1 = double(w[1]) - w[0], dw2 = double(w[2]) - w[0];
   const double gx = (dw1 * d2.y - dw2 * d1.y) / det, gy = (dw2 * d1.x - dw1 * d2.x) / det;
   return std::sqrt(gx * gx + gy * gy);
+}
+
+// The draw's test with the hold at (u, v, w) of patch triangle t, as if
+// (u, v) were held (passes).
+inline bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w) {
+  const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
+  const float wv[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
+  const double r = ctx.held_reach;
+  return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + weight_slope(uv, wv) * r));
 }
 
 // Barycentric coordinates of pixel centre (x, y) in pixel-space triangle P.
@@ -171,18 +181,35 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
+  // Triangles already in `found`, by an epoch stamp per fluid triangle: a
+  // linear search made the walk quadratic, and a patch stretched over the
+  // whole liquid (--mode advect) walks the 4096 triangles of the guard for
+  // each of its triangles (140 s a frame on channel at 1024²).
+  thread_local std::vector<uint32_t> stamp;
+  thread_local uint32_t epoch = 0;
+  if (stamp.size() != ctx.mesh.triangles.size() || epoch == UINT32_MAX) {
+    stamp.assign(ctx.mesh.triangles.size(), 0);
+    epoch = 0;
+  }
+  ++epoch;
+  auto add = [&](int32_t f) {
+    if (stamp[std::size_t(f)] == epoch) return false;
+    stamp[std::size_t(f)] = epoch;
+    found.push_back(f);
+    return true;
+  };
   found.clear();
   for (int k = 0; k < 3; ++k)
-    if (vtri[k] >= 0 && std::find(found.begin(), found.end(), vtri[k]) == found.end()) found.push_back(vtri[k]);
+    if (vtri[k] >= 0) add(vtri[k]);
   constexpr std::size_t kMaxWalk = 4096;  // guard against pathological meshes
   for (std::size_t q = 0; q < found.size() && found.size() < kMaxWalk; ++q) {
     const Tri& ft = ctx.mesh.triangles[found[q]];
     for (int k = 0; k < 3; ++k)
       for (int32_t j = ctx.vt_offset[ft[k]]; j < ctx.vt_offset[ft[k] + 1]; ++j) {
         const int32_t g2 = ctx.vt_list[j];
-        if (std::find(found.begin(), found.end(), g2) != found.end()) continue;
+        if (stamp[std::size_t(g2)] == epoch) continue;
         if (norm(ctx.tri_centroid[g2] - g.centre) > g.radius + ctx.tri_radius[g2] + g.margin) continue;
-        found.push_back(g2);
+        add(g2);
       }
   }
   const auto& tm = ctx.atlas.texels;
@@ -699,8 +726,8 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   // cores at once.
   parallel_for(3, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
-      if (k == 0) out.color = Image(N, N, 4);
-      if (k == 1) out.displacement = Image(N, N, 1);
+      if (k == 0 && options.images) out.color = Image(N, N, 4);
+      if (k == 1 && options.images) out.displacement = Image(N, N, 1);
       if (k == 2 && options.aov) out.aov = Image(N, N, 4);
     }
   }, 1);
@@ -829,7 +856,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
-          if (!blended) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
+          if (!blended && options.images) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
           // Only a texel whose 3x3 neighbourhood lies in its chart marks
           // (mark_held): near a seam the texels of two charts sample the same
           // surface at arbitrary offsets, and a cell marked from one chart
@@ -837,8 +864,12 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           // A texel of a small hole closed by a patch at rest marks too: the
           // next frame gives the region back to it (close_held_texels)
           // instead of closing it anew from whichever neighbour comes first.
+          // Not where the draw's held test (passes) would then keep it: that
+          // would turn a closed texel into a won one on the next frame, a
+          // change of a surface at rest.
           if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i] ||
-                       (patch.at_rest && !ctx.closed.empty() && ctx.closed[i])) &&
+                       (patch.at_rest && !ctx.closed.empty() && ctx.closed[i] &&
+                        !held_test_keeps(ctx, patch, t, u, v, w))) &&
               interior_texel(i, x, y))
             mark_held(p, u, v, cur->ux, cur->uy);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
@@ -849,13 +880,15 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
         }
         ++run;
       }
-      if (blended) {
-        const int64_t* sum = &ctx.blend.sums[i * 5];
-        for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
+      if (options.images) {
+        if (blended) {
+          const int64_t* sum = &ctx.blend.sums[i * 5];
+          for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
+        }
+        float* c = &out.color.pixels[std::size_t(pix) * 4];
+        c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
+        out.displacement.pixels[pix] = s[3];
       }
-      float* c = &out.color.pixels[std::size_t(pix) * 4];
-      c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
-      out.displacement.pixels[pix] = s[3];
       if (options.aov)
         for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
     }

@@ -474,10 +474,12 @@ TEST(Eval, SettlingDropAtRestKeepsItsPatches) {
   BakeOptions o = small_bake(in.str(), paper.str());
   o.allow_zero_velocity = true;
   o.atlas.resolution = 1024;
+  o.raster.use_paper_hole_filling();
   run_bake(o);
   o.out_dir = held.str();
-  o.raster.hold = true;
+  o.raster.hold = true;  // the defaults
   o.raster.small_hole = 0.25;
+  o.raster.merge = 0.1;
   run_bake(o);
   const EvalReport a = evaluate_bake(paper.str()), b = evaluate_bake(held.str());
   ASSERT_EQ(a.frames.size(), std::size_t(kFrames));

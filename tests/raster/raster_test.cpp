@@ -18,6 +18,15 @@
 namespace lapflow {
 namespace {
 
+/// The paper's raster (every hole a patch, no hysteresis, no merge): what the
+/// brute-force reference (expect_matches_reference) computes. Tests of
+/// RasterOptions::hold, small_hole and merge turn them on themselves.
+RasterOptions paper_options() {
+  RasterOptions o;
+  o.use_paper_hole_filling();
+  return o;
+}
+
 using test::PatchSpec;
 using test::PlaneFixture;
 
@@ -190,7 +199,7 @@ TEST(Raster, ErosionMatchesThePaperFormulaTexelByTexel) {
     s.centre = {0.5, 0.5, 0};
     s.r = 0.5, s.half = 0.5, s.m = 10, s.w0 = w;
     sc.add(s);
-    RasterOptions o;
+    RasterOptions o = paper_options();
     o.fill_holes = false;
     o.retire = false;
     const FrameTextures out = sc.run(o, false);
@@ -213,7 +222,7 @@ TEST(Raster, FlatFeatureMapKeepsTheInscribedDisk) {
   s.centre = {0.5, 0.5, 0};
   s.r = 0.5, s.half = 0.5, s.m = 8;
   sc.add(s);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.fill_holes = false;
   const FrameTextures out = sc.run(o, false);
   const double M = sc.rex.erosion.inv_max > 0 ? 1 / sc.rex.erosion.inv_max : 0;
@@ -225,7 +234,7 @@ TEST(Raster, FlatFeatureMapKeepsTheInscribedDisk) {
 
 TEST(Raster, OldestNonErodedPatchWinsOnePatchPerTexel) {
   Scene sc = random_scene(false, 40, 11);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mipmap = false;
   const FrameTextures out = sc.run(o);
   EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
@@ -253,7 +262,7 @@ TEST(Raster, OldestNonErodedPatchWinsOnePatchPerTexel) {
 
 TEST(Raster, SeamFallbackAgreesWithThePaperAcrossCharts) {
   Scene sc = random_scene(true, 40, 23);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mipmap = false;
   const FrameTextures out = sc.run(o);
   EXPECT_GT(out.stats.seam_triangles, 0u);
@@ -272,7 +281,7 @@ TEST(Raster, OlderPatchHidesYoungerOneWhichRetires) {
   sc.add(a);
   sc.add(hidden);
   sc.add(side);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.fill_holes = false;
   const FrameTextures out = sc.run(o, false);
   ASSERT_EQ(sc.patches.patches.size(), 2u);
@@ -301,7 +310,7 @@ TEST(Raster, OlderPatchHidesYoungerOneWhichRetires) {
 
 TEST(Raster, HoleFillingCoversEveryTexelFromNothing) {
   Scene sc = random_scene(true, 0, 5);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   const FrameTextures out = sc.run(o);
   EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
   EXPECT_EQ(out.stats.forced_texels, 0u);
@@ -319,7 +328,7 @@ TEST(Raster, HoleFillingCoversEveryTexelFromNothing) {
 std::pair<FrameTextures, std::size_t> bake_random_scene(int threads, RasterMode mode) {
   set_thread_count(threads);
   Scene sc = random_scene(true, 60, 99);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mode = mode;
   FrameTextures out = sc.run(o);
   set_thread_count(0);
@@ -338,7 +347,7 @@ TEST(Raster, SameImagesForOneAndTwoThreads) {
 
 TEST(Raster, GutterAndBackgroundTakeTheNearestChartTexel) {
   Scene sc = random_scene(true, 30, 3, 128);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.gutter = 3;
   const FrameTextures out = sc.run(o);
   const int N = 128;
@@ -369,7 +378,7 @@ TEST(Raster, MipLevelMatchesTheTexelFootprint) {
   // 1 m plane, 0.9 of a 256 atlas: 1/230.4 m per texel; r = 0.1 puts 0.2 m on
   // a 64-pixel exemplar: 320 px/m, so 1.39 exemplar pixels per atlas texel.
   Scene sc = random_scene(false, 20, 8);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   const FrameTextures out = sc.run(o);
   EXPECT_NEAR(out.stats.texel_world_size, 1.0 / (0.9 * 256), 1e-9);
   EXPECT_NEAR(out.stats.lod, std::log2(64 / (0.9 * 256 * 0.2)), 1e-9);
@@ -392,7 +401,7 @@ TEST(Raster, DistortedTrianglesAreNeverDrawn) {
     p.triangle_delta.assign(p.triangles.size(), 1.0f);
     for (std::size_t t = 0; t < p.triangles.size(); t += 2) p.triangle_delta[t] = 3.5f;  // > delta_max = 3
   }
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.fill_holes = false;
   const FrameTextures out = sc.run(o, false);
   EXPECT_EQ(out.stats.distorted_triangles, 10u * 64);
@@ -434,7 +443,7 @@ TEST(Raster, AdvectModeNeitherErodesNorRetires) {
     return sc;
   };
   Scene er = scene();
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.fill_holes = false;
   const FrameTextures eroded = er.run(o, false);
   EXPECT_EQ(eroded.stats.covered_texels, 0u);
@@ -455,7 +464,7 @@ TEST(Raster, RejectsAnAtlasOfAnotherMesh) {
   Scene sc = random_scene(false, 3, 1, 64);
   SurfaceAtlas wrong = sc.f.atlas;
   wrong.corner_uv.pop_back();
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.radius = sc.r;
   for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
     o.mode = mode;
@@ -490,7 +499,7 @@ TEST(Raster, ChartNoPatchReachesTakesTheNearestPatch) {
     PatchSpec a;
     a.centre = {0.3, 0.5, 0}, a.r = 0.15, a.half = 0.15, a.w0 = 1;
     sc.add(a);
-    RasterOptions o;
+    RasterOptions o = paper_options();
     o.mode = mode;
     o.radius = 0.15;
     const FrameTextures out = raster_frame(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0,
@@ -517,7 +526,7 @@ TEST(Raster, NewbornsThatKeepNothingStillCoverTheirHoles) {
     p->triangle_delta.assign(p->triangles.size(), INFINITY);
     return p;
   };
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.radius = sc.r;
   const FrameTextures out =
       raster_frame(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{}, 0, folded, TriangleLocator{}, sc.patches);
@@ -539,7 +548,7 @@ TEST(RasterBlend, OverlapIsTheExactWeightedAverage) {
   b.centre = {0.6, 0.55, 0}, b.w0 = 0.3, b.wx = 0, b.wy = -0.4, b.angle = 0.7;
   sc.add(a);
   sc.add(b);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mode = RasterMode::Blend;
   o.mipmap = false;
   o.fill_holes = false;
@@ -597,7 +606,7 @@ TEST(RasterBlend, HiddenPatchesContributeAndOnlyWeightlessOnesRetire) {
   sc.add(a);
   sc.add(hidden);
   sc.add(weightless);
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mode = RasterMode::Blend;
   o.fill_holes = false;
   const FrameTextures out = sc.run(o, false);
@@ -631,7 +640,7 @@ TEST(RasterBlend, GhostingLowersContrastAgainstErosion) {
       for (int x = 0; x < 64; ++x)
         for (int c = 0; c < 3; ++c) sc.ex.color.at(x, y, c) = float(((x / 8) + (y / 8)) % 2);
     sc.rex = prepared(sc.ex);
-    RasterOptions o;
+    RasterOptions o = paper_options();
     o.mode = mode;
     FrameTextures out = sc.run(o);
     EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
@@ -731,7 +740,7 @@ namespace {
 // the patches around them, wider ones still get a patch, and coverage stays
 // complete either way.
 TEST(Raster, NarrowHolesAreClosedByTheirNeighboursWideOnesGetAPatch) {
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.mipmap = false;
   Scene paper = random_scene(false, 40, 11);
   const FrameTextures a = paper.run(o);
@@ -805,7 +814,7 @@ TEST(Raster, MergeRetiresASmallPatchWhoseTexelsAnotherKeeps) {
     sc.add(c);
     return sc;
   };
-  RasterOptions o;
+  RasterOptions o = paper_options();
   o.fill_holes = false;
   Scene paper = scene();
   const FrameTextures p0 = paper.run(o, false);

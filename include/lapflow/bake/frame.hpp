@@ -9,6 +9,7 @@
 #include <string>
 
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/io/mesh_io.hpp"
 #include "lapflow/raster/raster.hpp"
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/surface/surface_query.hpp"
@@ -24,6 +25,10 @@ struct FrameSource {
   std::string velocity_grid;         ///< grid name; tries vel, v, velocity when empty
   double min_speed = 0;              ///< m/s: slower velocities count as zero
   bool allow_zero_velocity = false;  ///< a mesh without velocity is still (else an InputError)
+  /// Accept a frame with sizes, speeds or property types no liquid has
+  /// (units_problems in io/mesh_io.hpp); else it is an InputError naming
+  /// the file and frame.
+  bool units_ok = false;
   /// Per-vertex velocities are sampled once per frame on voxels of
   /// `velocity_voxel` mean edge lengths within `velocity_band` voxels of the
   /// surface, then read trilinearly (band 0 = an exact closest-point query
@@ -53,6 +58,15 @@ struct FrameStats {
   std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
   std::size_t closed_texels = 0;          ///< chart texels of small holes closed by their neighbours
   std::size_t held_texels = 0;            ///< hole texels given back to the patch that held the point
+  /// The tracking raster (BakeOptions::track_texel), where births and
+  /// retirements are decided; the fields above are the output raster's
+  /// (zero for `lapflow track`, which draws no output).
+  struct Tracking {
+    int resolution = 0;
+    double texel_size = 0;               ///< metres per tracking texel on the surface (area-weighted mean)
+    std::size_t chart_texels = 0, forced_texels = 0, closed_texels = 0, held_texels = 0;
+    double utilization = 0;
+  } tracking;
   /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
   /// the atlas's own build time, on the read-ahead thread (so it overlaps
   /// the previous frame, except on the first); raster: draw, holes, resolve,
@@ -62,13 +76,15 @@ struct FrameStats {
   double seconds_read = 0, seconds_advect = 0, seconds_weights = 0, seconds_seed = 0, seconds_atlas = 0,
          seconds_raster = 0, seconds_write = 0, seconds_total = 0, seconds_state = 0;
   double seconds_draw = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0, seconds_dilate = 0;
+  double seconds_track = 0;  ///< the tracking raster (draw, holes, counts, retire), within `raster`
   double peak_rss_mb = 0;
   std::string velocity_source;
 };
 
 /// A frame's input as read from disk: the mesh and, with a VDB pattern, the
 /// velocity grid. Checks the velocity rules of FrameSource (a missing
-/// velocity is an InputError naming the file unless allowed).
+/// velocity is an InputError naming the file unless allowed) and, unless
+/// FrameSource::units_ok, the units (check_frame_units).
 struct FrameInput {
   int number = 0;
   std::string path;                     ///< the mesh file
@@ -76,6 +92,14 @@ struct FrameInput {
   std::unique_ptr<VelocityGrid> grid;   ///< set with FrameSource::velocity_vdb_pattern
 };
 FrameInput read_frame_input(const FrameSource& source, int frame);
+
+/// Throws InputError naming `path` and `frame` when the frame has sizes,
+/// speeds or property types no liquid has (units_problems: every problem in
+/// the one line, which ends saying that --units-ok bakes anyway). The vertex
+/// velocities count when the velocity comes from them (`vertex_velocity`);
+/// a `grid` is sampled at the vertices the triangles use.
+void check_frame_units(const std::string& path, int frame, const MeshFile& file, bool vertex_velocity,
+                       const VelocityGrid* grid = nullptr);
 
 /// Everything about one frame. Members refer to each other (the surface
 /// query to the mesh, the velocity to both), so a Frame stays where it was
@@ -92,7 +116,8 @@ struct Frame {
   std::unique_ptr<VelocityGrid> velocity_grid;    ///< with a VDB pattern
   VelocityField velocity;                         ///< after FrameSource's rules (band, min-speed)
   std::string velocity_source;                    ///< "vertex", "vdb:NAME", "zero", ...
-  SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas)
+  SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas): the output's
+  SurfaceAtlas tracking_atlas;                    ///< the same at the tracking resolution
   RasterBuffers raster;                           ///< steps 7-9 in progress
   FrameTextures textures;                         ///< the atlas images once resolved
   FrameStats stats;

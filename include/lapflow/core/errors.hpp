@@ -15,6 +15,17 @@ namespace lapflow {
 /// that are not printable ASCII escaped as \xHH.
 std::string quote_token(std::string_view token);
 
+/// The longest line lapflow prints for an error or warning, in bytes.
+inline constexpr std::size_t kMaxMessageChars = 300;
+
+/// `text` as one printable line of at most `max_chars` bytes: trailing
+/// blanks dropped; control characters (a newline too) and bytes that are not
+/// valid UTF-8 escaped as \xHH, valid UTF-8 kept (a path or a unit such as
+/// m² stays readable); a longer line cut, ending in "... (N characters)",
+/// N the length of `text`. The CLI prints every error through it, whatever
+/// a library or an input file put in the message.
+std::string printable_line(std::string_view text, std::size_t max_chars = kMaxMessageChars);
+
 /// Malformed or missing input. what() is one line naming the file, the frame
 /// when known, the element, and what is wrong:
 /// `dam.0004.ply (frame 4): vertex 1207: velocity is NaN`.

@@ -28,6 +28,29 @@ UvMesh read_uv_mesh(const std::string& path);
 /// file's 3e38, or a mesh not in metres). An empty mesh (no triangles) is legal.
 TriMesh read_mesh(const std::string& path);
 
+/// How a mesh file declared the vertex data lapflow reads: each position and
+/// velocity property with its PLY type as the header spells it. Empty for
+/// OBJ (text, read as double).
+struct MeshFileInfo {
+  struct Property {
+    std::string name;      ///< "x", "vx", "velocity_x", ...
+    std::string type;      ///< "float", "int", "uint8", ...
+    bool integer = false;  ///< an integer type (char to uint)
+  };
+  std::vector<Property> positions;   ///< x, y, z
+  std::vector<Property> velocities;  ///< empty when the file has no velocity
+};
+
+/// A mesh as read from its file, with how the file declared its data.
+struct MeshFile {
+  TriMesh mesh;
+  MeshFileInfo declared;
+};
+/// read_mesh, also telling the declared property types. With `check_bounds`
+/// false a mesh beyond kMaxMeshCoordinate is returned instead of refused
+/// (lapflow inspect reports it); every other check stays.
+MeshFile read_mesh_file(const std::string& path, bool check_bounds = true);
+
 /// read_mesh on bytes already in memory: `name` gives the format (its
 /// extension, else PLY when the bytes start with the PLY magic) and names the
 /// input in errors. The readers' entry point for the fuzzers (tests/fuzz).
@@ -43,6 +66,28 @@ inline constexpr double kMaxMeshCoordinate = 1e6;
 /// Throws InputError naming `path` when a vertex of a triangle of `mesh`
 /// lies farther than kMaxMeshCoordinate from the origin on any axis.
 void check_mesh_bounds(const TriMesh& mesh, const std::string& path);
+
+/// Sizes and speeds no liquid in metres and seconds has. `lapflow inspect`
+/// warns about a frame beyond them, `lapflow bake` refuses it (exit 2) unless
+/// --units-ok; both take them from here. Unlike kMaxMeshCoordinate they
+/// are a question about the units, not a limit of lapflow's.
+/// A side of the bounding box of the vertices triangles use, in metres.
+inline constexpr double kMaxLiquidSize = 1000;
+/// The length of a vertex velocity, in m/s (the fastest splash is tens).
+inline constexpr double kMaxLiquidSpeed = 1000;
+
+/// What `mesh` (with the types its file `declared`) has that no liquid has,
+/// one sentence each, empty when nothing: bounds over kMaxLiquidSize, a
+/// vertex beyond kMaxMeshCoordinate, a used vertex faster than
+/// kMaxLiquidSpeed, a position or velocity declared with an integer PLY type
+/// (which cannot hold sub-millimetre coordinates). With `check_velocity`
+/// false (the velocity comes from elsewhere) the vertex velocities are not
+/// looked at. E.g. "mesh bounds 3.2e+38 m across: over 1 km, are the units
+/// metres?".
+std::vector<std::string> units_problems(const TriMesh& mesh, const MeshFileInfo& declared, bool check_velocity = true);
+/// The sentence of units_problems for a `speed` (m/s) over kMaxLiquidSpeed
+/// at `vertex`, from `source` ("the vertex velocity", "the VDB grid 'vel'").
+std::string speed_problem(double speed, std::size_t vertex, const std::string& source);
 
 /// Writes a mesh as binary little-endian PLY with float x y z and, when the
 /// mesh has velocities, float vx vy vz (the layout of ../shared/data).

@@ -40,27 +40,39 @@ struct RasterOptions {
   bool mipmap = true;         ///< exemplar lookups at the mip level of the atlas texel footprint (antialiasing)
   bool trilinear = true;      ///< blend the two nearest mip levels (false: nearest level, ~half the lookup cost)
   bool aov = true;            ///< fill FrameTextures::aov
+  /// Fill FrameTextures::color and displacement (false: resolve_texels only
+  /// counts the texels each patch won and marks Patch::held, as the
+  /// tracking raster needs; the images stay empty).
+  bool images = true;
   bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
   int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
   std::size_t max_hole_patches = 200000;  ///< guard on patches born per frame
   /// Holes no wider than this times r are closed by the patches around them
   /// instead of a new patch (0 = every hole gets a patch, as in the paper).
-  /// docs/temporal.md says why.
-  double small_hole = 0.0;
+  /// docs/temporal.md says why, and why 0.25 is the default.
+  double small_hole = 0.25;
   /// Hysteresis of the erosion test in patch space (docs/temporal.md): where
   /// a patch has won texels (Patch::held), the test reads the feature map's
   /// maximum and w's within one atlas texel and lowers the bar by
   /// hold_margin (in the units of w), so a texel does not change hands when
   /// only the atlas's sampling of the surface moved. An unchanged mesh still
-  /// gives bit-identical frames. Off by default until its default is decided
-  /// on every shared scene; false = the paper's memoryless test.
-  bool hold = false;
+  /// gives bit-identical frames. false = the paper's memoryless test.
+  bool hold = true;
   double hold_margin = 0.05;
   /// Retire ("merge") a patch that won fewer texels than this fraction of
   /// pi r^2 (in texels) when other patches pass the erosion test on every one
   /// of them, so they take them over on the next frame. 0 = off (the paper
   /// retires only patches that won nothing). docs/temporal.md.
-  double merge = 0.0;
+  double merge = 0.1;
+  /// The paper's erosion, hole filling and retirement (2021) as published:
+  /// every hole gets a new patch, no hysteresis, only patches that won
+  /// nothing retire. For comparisons (`--paper`); the defaults above bound
+  /// the population and hold a still liquid still (docs/temporal.md).
+  void use_paper_hole_filling() {
+    small_hole = 0.0;
+    hold = false;
+    merge = 0.0;
+  }
 };
 
 /// Box-filtered mip pyramid of the exemplar's colour and displacement,
@@ -181,6 +193,14 @@ void draw_patches(RasterBuffers& buffers, const PatchSet& patches);
 /// drawn into the still-open texels. Texels still open after that take a
 /// neighbour's patch (forced_texels).
 void fill_holes(RasterBuffers& buffers, PatchSet& patches, int frame, const PatchMaker& make_patch);
+
+/// Step 8 of a render of a tracked state (docs/farm.md): no patch is born.
+/// Held points go back to their patch, and every other open texel takes a
+/// neighbour's patch within its chart (closed_texels: the small holes the
+/// tracking closed, those narrower than a tracking texel, and the output's
+/// own sampling of the patches' eroded edges); only texels of a chart no
+/// patch reaches take the nearest patch in 3D (forced_texels).
+void close_holes(RasterBuffers& buffers, const PatchSet& patches);
 
 /// The atlas images: each chart texel's colour, displacement and AOV from
 /// the patch that keeps it, at its (u, v). Counts the texels each patch won.
