@@ -64,7 +64,7 @@ trap 'exit 143' TERM
 # munge: the package ships /etc/munge/munge.key; a munged already running is used as it is.
 if ! munge -n </dev/null 2>/dev/null | unmunge >/dev/null 2>&1; then
   mkdir -p /run/munge && chown munge:munge /run/munge
-  setpriv --reuid=munge --regid=munge --init-groups /usr/sbin/munged --foreground &
+  setpriv --reuid=munge --regid=munge --init-groups /usr/sbin/munged --foreground >"$work/slurm/log/munged.log" 2>&1 &
   pids+=($!)
   for _ in $(seq 50); do munge -n </dev/null 2>/dev/null | unmunge >/dev/null 2>&1 && break; sleep 0.1; done
   munge -n </dev/null | unmunge >/dev/null || { echo "slurm-test: munged does not answer" >&2; exit 1; }
@@ -132,10 +132,12 @@ sed 's/^/  /' "$work/submit.txt"
 wait_for_jobs
 farm_seconds=$(( $(date +%s) - farm_start ))
 say "farm bake done in ${farm_seconds}s"
-"$lapflow" farm status farm | sed 's/^/  /'
-if grep -L "lapflow farm: exit 0" farm/farm/logs/*.log | grep -q .; then
-  echo "slurm-test: a job did not end with exit 0:" >&2
-  grep -L "lapflow farm: exit 0" farm/farm/logs/*.log | while read -r log; do echo "== $log" >&2; tail -5 "$log" >&2; done
+"$lapflow" farm status farm | tee "$work/status.txt" | sed 's/^/  /'
+failed=()
+for log in farm/farm/logs/*.log; do grep -qx "lapflow farm: exit 0" "$log" || failed+=("$log"); done
+if [ ${#failed[@]} -gt 0 ] || ! grep -qx "$frames frames: $frames rendered, .*" "$work/status.txt"; then
+  echo "slurm-test: FAIL: not every frame was rendered, or a job did not end with exit 0:" >&2
+  for log in "${failed[@]}"; do echo "== $log" >&2; tail -5 "$log" >&2; done
   exit 1
 fi
 

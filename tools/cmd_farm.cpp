@@ -18,7 +18,6 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <sstream>
 
 #include "cli_common.hpp"
 #include "scene_file.hpp"
@@ -68,7 +67,6 @@ BakeArguments scan_bake_arguments(const std::vector<std::string>& verbatim) {
       into = a.substr(option.size() + 1);
       return true;
     };
-    std::string quiet;
     if (value("--out", b.out) || value("--name", b.name) || value("--mesh", b.mesh) || value("--frames", b.frames) ||
         value("--threads", threads))
       continue;
@@ -313,7 +311,8 @@ std::string submit_script(const FarmPlan& p) {
       p.name, p.frames.first, p.frames.last, p.chunk);
   for (std::size_t k = 0; k < p.chunks.size(); ++k) {
     // sbatch_arguments() with the previous job's id from a shell variable.
-    const std::string after = k == 0 ? "" : fmt::format(" --dependency=afterok:${{t{}%%;*}} --kill-on-invalid-dep=yes", k);
+    const std::string after =
+        k == 0 ? "" : fmt::format(" --dependency=afterok:${{t{}%%;*}} --kill-on-invalid-dep=yes", k);
     s += fmt::format("t{}=$(sbatch --parsable{} {})\n", k + 1, after, shell_quote(p.chunks[k].track_script));
     s += fmt::format("r{0}=$(sbatch --parsable --dependency=afterok:${{t{0}%%;*}} --kill-on-invalid-dep=yes {1})\n",
                      k + 1, shell_quote(p.chunks[k].render_script));
@@ -358,6 +357,11 @@ Captured run_captured(const std::vector<std::string>& argv) {
   for (std::string& a : args) cargs.push_back(a.data());
   cargs.push_back(nullptr);
   const pid_t pid = ::fork();
+  if (pid < 0) {
+    const int error = errno;
+    for (int fd : {out_pipe[0], out_pipe[1], err_pipe[0], err_pipe[1]}) ::close(fd);
+    throw std::runtime_error("fork: " + std::string(std::strerror(error)));
+  }
   if (pid == 0) {
     ::dup2(out_pipe[1], STDOUT_FILENO);
     ::dup2(err_pipe[1], STDERR_FILENO);
@@ -393,7 +397,6 @@ Captured run_captured(const std::vector<std::string>& argv) {
   for (pollfd& f : fds)
     if (f.fd >= 0) ::close(f.fd);
   int status = 0;
-  if (pid < 0) return {127, "", std::strerror(errno)};
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
@@ -445,8 +448,9 @@ void run_slurm(const SlurmCli& c, const std::vector<std::string>& command, const
   for (std::size_t k = 0; k < p.chunks.size(); ++k) {
     Chunk& ch = p.chunks[k];
     for (const bool track : {true, false}) {
-      const std::vector<std::string> args = track ? sbatch_arguments(ch.track_script, k > 0 ? p.chunks[k - 1].track_job : "")
-                                                  : sbatch_arguments(ch.render_script, ch.track_job);
+      const std::vector<std::string> args =
+          track ? sbatch_arguments(ch.track_script, k > 0 ? p.chunks[k - 1].track_job : "")
+                : sbatch_arguments(ch.render_script, ch.track_job);
       try {
         (track ? ch.track_job : ch.render_job) = submit(args);
       } catch (...) {
@@ -595,12 +599,12 @@ void run_status(const StatusCli& c) {
   }
   fmt::print("{} in {}: {}\n", m.name, m.dir,
              m.frames.empty() ? "no frames" : fmt::format("frames {}-{}", m.frames.front(), m.frames.back()));
-  // One line per run of consecutive frames with the same status; a failed frame alone, with its re-run command.
+  // One line per run of consecutive frames with the same status (and the same re-run command).
   for (std::size_t i = 0; i < frames.size();) {
     std::size_t j = i + 1;
-    if (frames[i].status != FrameStatus::Failed)
-      while (j < frames.size() && frames[j].status == frames[i].status && frames[j].frame == frames[j - 1].frame + 1)
-        ++j;
+    while (j < frames.size() && frames[j].status == frames[i].status && frames[j].rerun == frames[i].rerun &&
+           frames[j].frame == frames[j - 1].frame + 1)
+      ++j;
     const std::string span =
         j - i == 1 ? std::to_string(frames[i].frame) : fmt::format("{}-{}", frames[i].frame, frames[j - 1].frame);
     fmt::print("  {:<9} {}{}\n", status_name(frames[i].status), span,
