@@ -8,9 +8,10 @@
 #   3. writes the demo scene, submits `lapflow farm slurm` of it and waits;
 #   4. checks that every frame's colour and displacement EXR, AOV, OBJ and MTL
 #      have the sha256 digest of a one-process `lapflow bake` of the same scene;
-#   5. re-submits the same farm command (every job finds its work done and the
-#      files keep their bytes), re-runs one frame's task alone with the command
-#      `lapflow farm slurm` printed, and checks the digests again;
+#   5. re-submits the same farm command (every job finds its work done and no
+#      frame is rewritten), deletes frame 5's files and re-runs its task alone
+#      (sbatch --array=I render.S-E.sh, as docs/farm.md says), and checks the
+#      digests again;
 #   6. stops the daemons it started, by process id, whatever happens.
 # Usage: bash scripts/slurm-test.sh [BUILD_DIR]   (default build; the binary
 # must be built). FRAMES (8), CHUNK (3), ATLAS (256) and WORK (a new folder
