@@ -97,6 +97,8 @@ void add_demo_command(CLI::App& app);
 void add_atlas_command(CLI::App& app);
 void add_patches_command(CLI::App& app);
 void add_bake_command(CLI::App& app);
+void add_track_command(CLI::App& app);
+void add_render_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
 /// `lapflow preview DIR --width W --height H` with every other option at its default.
 void preview_bake(const std::string& dir, int width, int height);

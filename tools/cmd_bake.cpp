@@ -23,26 +23,30 @@ void bake_with_progress(BakeOptions& o) {
   const BakeMemoryEstimate memory = resolve_bake_options(o);
 
   const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
-  info("lapflow bake: {} frames {}-{} of {}", frames.size(), frames.front(), frames.back(), o.mesh_pattern);
-  info("  exemplar {} | radius {:.4g} m | atlas {}x{} | seed {} | {} threads", o.exemplar_color, o.patch.radius,
-       o.atlas.resolution, o.atlas.resolution, o.seed, thread_count_label());
-  info("  memory estimate {} (atlas {}, {:.0f} patches {}, meshes {}, exemplar {}) of --max-memory {}",
-       format_bytes(memory.total), format_bytes(memory.atlas), memory.patches,
+  const std::string verb = o.track_only ? "track" : "bake";
+  info("lapflow {}: {} frames {}-{} of {}", verb, frames.size(), frames.front(), frames.back(), o.mesh_pattern);
+  info("  exemplar {} | radius {:.4g} m | atlas {}x{} | tracking texel {:.4g} r | seed {} | {} threads",
+       o.exemplar_color, o.patch.radius, o.atlas.resolution, o.atlas.resolution, o.track_texel, o.seed,
+       thread_count_label());
+  info("  memory estimate {} (atlas {}, tracking {}, {:.0f} patches {}, meshes {}, exemplar {}) of --max-memory {}",
+       format_bytes(memory.total), format_bytes(memory.atlas), format_bytes(memory.tracking), memory.patches,
        format_bytes(memory.patch_bytes + memory.seeding), format_bytes(memory.meshes), format_bytes(memory.exemplar),
        format_bytes(double(o.max_memory > 0 ? o.max_memory : default_memory_budget())));
-  Progress progress("bake", frames.size());
+  Progress progress(verb, frames.size());
   double seconds = 0;
   std::size_t baked = 0;  // fewer than frames.size() when --resume skipped the frames already there
   bake(o, [&](const FrameStats& s) {
     seconds += s.seconds_total;
     ++baked;
-    progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), coverage {:.2f}%, {:.2f}s", s.frame,
-                              s.triangles, s.patches_alive, s.patches_born, s.patches_retired + s.patches_lost,
-                              100 * s.coverage, s.seconds_total));
+    progress.step(fmt::format("frame {}: {} tris, {} patches (+{} -{}), tracked at {}px, coverage {:.2f}%, {:.2f}s",
+                              s.frame, s.triangles, s.patches_alive, s.patches_born,
+                              s.patches_retired + s.patches_lost, s.tracking.resolution, 100 * s.coverage,
+                              s.seconds_total));
   });
   progress.finish();
-  if (baked < frames.size())
-    info("resumed: {} of the {} frames were already baked in {}", frames.size() - baked, frames.size(), o.out_dir);
+  if (baked < frames.size() && !o.until_frame)
+    info("resumed: {} of the {} frames were already {} in {}", frames.size() - baked, frames.size(),
+         o.track_only ? "tracked" : "baked", o.out_dir);
   info("done: {} frames in {:.1f} s ({:.2f} s/frame), peak memory {:.0f} MiB; outputs in {}", baked, seconds,
        seconds / double(std::max<std::size_t>(baked, 1)), peak_rss_mb(), o.out_dir);
 }
@@ -90,12 +94,14 @@ void run_bake(BakeCli& c) {
   o.raster.mode = parse_raster_mode(c.mode);
   if (c.paper) o.raster.use_paper_hole_filling();
   o.keep_states = parse_keep_states(c.keep_states);
+  if (o.track_only) o.keep_states = -1;  // render needs every frame's
   bake_with_progress(o);
 }
 
 }  // namespace
 
 void add_bake_options(CLI::App& cmd, BakeCli& c);
+void add_track_command(CLI::App& app);
 
 void add_bake_command(CLI::App& app) {
   static BakeCli c;
@@ -130,6 +136,30 @@ void add_bake_command(CLI::App& app) {
   add_bake_options(*cmd, c);
   add_global_options(*cmd);
   cmd->callback([] { run_bake(c); });
+}
+
+void add_track_command(CLI::App& app) {
+  static BakeCli c;
+  static int until = 0;
+  CLI::App* cmd = app.add_subcommand("track", "The sequential pass of a farm bake: patch states, no atlas");
+  cmd->description(
+      "The sequential half of a bake: reads the frames, advects the patches, decides births and retirements at\n"
+      "the tracking resolution (--track-texel) and writes, per frame N in --out, NAME.state.N.bin (every frame's\n"
+      "is kept), plus NAME.bake.json and NAME.stats.jsonl. It writes no atlas and no UV mesh: `lapflow render`\n"
+      "makes them from the states, any frame on its own, at any --resolution. It takes a scene file and options\n"
+      "exactly as `lapflow bake` does; `lapflow bake` is track + render in one process, with the same files.\n"
+      "--resume continues after the last tracked frame (the output options may differ); --until F stops after\n"
+      "frame F (a chunk of a farm's chain: docs/farm.md).\n\n"
+      "Exit codes as for bake.");
+  add_bake_options(*cmd, c);
+  cmd->add_option("--until", until, "Stop after this frame (the manifest still names every frame of --frames)")
+      ->group("Output");
+  add_global_options(*cmd);
+  cmd->callback([] {
+    c.o.track_only = true;
+    if (until != 0) c.o.until_frame = until;
+    run_bake(c);
+  });
 }
 
 void add_bake_options(CLI::App& cmd, BakeCli& c) {
@@ -271,6 +301,13 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->capture_default_str()
       ->group("Atlas");
   cmd.add_option("--gutter", o.atlas.gutter, "Empty texels around every chart")->capture_default_str()->group("Atlas");
+  cmd.add_option("--track-texel", o.track_texel,
+                 "Births, retirements and held cells are decided on an atlas of their own with texels of this "
+                 "times the radius on the surface, whatever --resolution: a preview and a final of another "
+                 "resolution show the same patches (docs/farm.md)")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0 / 1024, 1.0))
+      ->group("Atlas");
   add_max_memory_option(cmd, o.max_memory,
                         "Before reading more than the first frame, the bake estimates its memory from the surface "
                         "area, --radius, --resolution and the exemplar's size (docs/robustness.md) and refuses (exit "

@@ -48,6 +48,13 @@ void keep_freed_memory_for_reuse() {
   mallopt(M_ARENA_MAX, 1);
 }
 
+int tracking_resolution(double area, double radius, double track_texel) {
+  const double texel = track_texel * radius;
+  if (!(texel > 0) || !(area > 0)) return 64;
+  const double n = std::ceil(std::sqrt(area / 0.7) / texel / 8.0) * 8.0;
+  return int(std::clamp(n, 64.0, 16384.0));
+}
+
 FrameSource frame_source(const BakeOptions& o) {
   FrameSource source;
   source.mesh_pattern = o.mesh_pattern;
@@ -70,6 +77,7 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
   o.patch.seed = o.seed;
   if (o.patch.radius < 0) throw UsageError("--radius must be positive");
   if (!(o.seeding.spacing > 0)) throw UsageError("--spacing must be positive");
+  if (!(o.track_texel >= 1.0 / 1024 && o.track_texel <= 1)) throw UsageError("--track-texel must be in [1/1024, 1]");
   if (o.patch.remesh && !(o.patch.remesh_edge > 0)) throw UsageError("--remesh-edge must be positive");
   // The first frame's mesh and the exemplar's headers: the automatic values
   // and the memory estimate come from them, before anything large exists.
@@ -98,22 +106,39 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
 
 namespace {
 
-/// The counts of a frame that its stages leave in the frame and the patches.
-void record_frame_stats(const Frame& frame, const PatchSet& patches, FrameStats& st) {
+/// The counts of a frame that its stages leave in the frame, the tracking
+/// raster and the patches; `rendered`: the frame has output images.
+void record_frame_stats(const Frame& frame, const RasterStats& tracking, const PatchSet& patches, FrameStats& st,
+                        bool rendered) {
   st.frame = frame.number;
   st.triangles = frame.mesh.triangle_count();
   st.vertices = frame.mesh.vertex_count();
   st.velocity_source = frame.velocity_source;
+  st.charts = frame.tracking_atlas.chart_count;
+  st.seconds_raster = st.seconds_track + st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
+  // Births and deaths: the tracking raster's decisions.
+  const RasterStats& t = tracking;
+  st.patches_born += t.patches_born;
+  st.patches_retired = t.patches_retired;
+  st.retired_eroded = t.retired_eroded;
+  st.retired_hidden = t.retired_hidden;
+  st.retired_merged = t.retired_merged;
+  st.patches_alive = patches.patches.size();
+  st.tracking.resolution = frame.tracking_atlas.resolution;
+  st.tracking.texel_size = t.texel_world_size;
+  st.tracking.chart_texels = t.chart_texels;
+  st.tracking.forced_texels = t.forced_texels;
+  st.tracking.closed_texels = t.closed_texels;
+  st.tracking.held_texels = t.held_texels;
+  st.tracking.utilization = frame.tracking_atlas.report.utilization;
+  if (!rendered) {
+    st.coverage = t.chart_texels ? double(t.covered_texels) / double(t.chart_texels) : 1.0;
+    return;  // `lapflow track`: no output raster
+  }
+  // Coverage: the output's.
   st.charts = frame.atlas.chart_count;
   st.utilization = frame.atlas.report.utilization;
   const RasterStats& r = frame.raster.stats;
-  st.seconds_raster = st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_retire + st.seconds_dilate;
-  st.patches_born += r.patches_born;
-  st.patches_retired = r.patches_retired;
-  st.retired_eroded = r.retired_eroded;
-  st.retired_hidden = r.retired_hidden;
-  st.retired_merged = r.retired_merged;
-  st.patches_alive = patches.patches.size();
   st.chart_texels = r.chart_texels;
   st.forced_texels = r.forced_texels;
   st.closed_texels = r.closed_texels;
@@ -178,7 +203,9 @@ ResumePoint find_resume_point(const BakeOptions& o, const BakeManifest& current)
   ResumePoint point;
   const std::string manifest_path = bake_manifest_path(o.out_dir, o.name);
   if (!fs::exists(manifest_path)) return point;  // nothing baked here yet
-  const std::vector<std::string> differences = bake_manifest_differences(manifest_path, current);
+  // `lapflow track` needs only the patches' options to match: a render may
+  // have set the output's anew in the manifest.
+  const std::vector<std::string> differences = bake_manifest_differences(manifest_path, current, o.track_only);
   if (!differences.empty()) {
     std::string what;
     for (std::size_t i = 0; i < differences.size() && i < 4; ++i) what += (i ? "; " : "") + differences[i];
@@ -187,7 +214,9 @@ ResumePoint find_resume_point(const BakeOptions& o, const BakeManifest& current)
                                         "); run without --resume to bake from the first frame");
   }
   const std::vector<int>& frames = current.frames;
-  for (std::size_t i = 0; i < frames.size() && fs::exists(current.frame_file("obj", frames[i])); ++i)
+  // A tracked frame is complete with its state; a baked one with its OBJ.
+  const std::string complete = o.track_only ? "state" : "obj";
+  for (std::size_t i = 0; i < frames.size() && fs::exists(current.frame_file(complete, frames[i])); ++i)
     if (fs::exists(current.frame_file("state", frames[i]))) point.index = std::ptrdiff_t(i);
   if (point.index < 0) return point;
   const int frame = frames[std::size_t(point.index)];
@@ -197,7 +226,7 @@ ResumePoint find_resume_point(const BakeOptions& o, const BakeManifest& current)
   if (h.name != o.name || h.frame != frame)
     throw InputError(path, "the state is of bake '" + h.name + "' frame " + std::to_string(h.frame) +
                                ", not of '" + o.name + "' frame " + std::to_string(frame));
-  if (h.options_checksum != bake_manifest_checksum(current))
+  if (h.options_checksum != bake_tracking_checksum(current))
     throw InputError(path, "the state was written by a bake with other options than NAME.bake.json's");
   return point;
 }
@@ -230,30 +259,38 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
   prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
-  const BakeManifest manifest = make_bake_manifest(o, frames);
+  BakeManifest manifest = make_bake_manifest(o, frames);
+  manifest.settings["feature_digest"] = exemplar_feature_digest(exemplar.feature);
   ResumePoint resume;
   if (o.resume) resume = find_resume_point(o, manifest);
   remove_states_after(o, manifest, resume.index);
   write_bake_manifest(manifest, bake_manifest_path(o.out_dir, o.name));
 
-  const std::vector<int> todo(frames.begin() + (resume.index + 1), frames.end());
+  // The frames to compute: after the resume point, up to --until.
+  std::vector<int> todo(frames.begin() + (resume.index + 1), frames.end());
+  if (o.until_frame) std::erase_if(todo, [&](int f) { return f > *o.until_frame; });
   detail::FrameReader reader(o, todo);
   detail::FrameWriter writer(o, manifest, on_frame);
   PatchSet patches;  // the state that carries over from frame to frame
   std::shared_ptr<const Frame> prev;
-  if (resume.index >= 0) {
+  if (resume.index >= 0 && !todo.empty()) {
     // The patches from the state, and the resumed frame read again for the
     // velocity the next advection starts from.
     patches = std::move(resume.state.patches);
     prev = load_frame(frame_source(o), resume.state.header.frame);
     writer.resume(stats_lines_until(o, manifest, resume), resume.state.header.frame);
   }
+  // The tracking raster: only what carries over is decided there.
+  RasterOptions tracking = o.raster;
+  tracking.aov = false;
+  tracking.images = false;
+  tracking.dilate = false;
   try {
     for (std::size_t left = todo.size(); left > 0; --left) {
       stop_if_asked(writer);
       Stopwatch frame_clock, clock;
       // Read ahead: mesh, surface query, velocity, and step 6, the frame's
-      // own atlas (it needs only the mesh).
+      // own atlases (they need only the mesh).
       const std::shared_ptr<Frame> frame = reader.next();
       Frame& cur = *frame;
       FrameStats& st = cur.stats;
@@ -278,28 +315,42 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
         st.seconds_seed = clock.lap();
       }
 
-      // Step 7: lapped rasterization, the oldest non-eroded patch per texel.
-      cur.raster = begin_raster(cur.mesh, cur.atlas, textures, o.raster, o.weights,
-                                surface_triangle_locator(*cur.surface, o.raster.radius));
-      draw_patches(cur.raster, patches);
-      st.seconds_draw = clock.lap();
-      // Step 8: new patches at the holes' centres.
-      const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
-      fill_holes(cur.raster, patches, cur.number,
-                 surface_patch_maker(*cur.surface, adjacency, o.patch, o.weights, cur.number));
-      st.seconds_holes = clock.lap();
-      // Each texel's colour and displacement from its patch.
-      cur.textures = resolve_texels(cur.raster, patches);
-      st.seconds_resolve = clock.lap();
-      // Step 9.
-      retire_patches(cur.raster, patches);
-      st.seconds_retire = clock.lap();
-      dilate_gutter(cur.raster, cur.textures);
-      st.seconds_dilate = clock.lap();
+      // Steps 7-9 at the tracking resolution (docs/farm.md): lapped
+      // rasterization, the oldest non-eroded patch per texel; new patches at
+      // the holes' centres; the texels each patch won; retirement. Patches
+      // and their held cells then carry over to the next frame.
+      const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
+      RasterStats tracked;
+      {
+        RasterBuffers t = begin_raster(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights, locate);
+        draw_patches(t, patches);
+        const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
+        fill_holes(t, patches, cur.number,
+                   surface_patch_maker(*cur.surface, adjacency, o.patch, o.weights, cur.number));
+        resolve_texels(t, patches);
+        retire_patches(t, patches);
+        tracked = std::move(t.stats);
+      }
+      st.seconds_track = clock.lap();
+
+      if (!o.track_only) {
+        // The output at its own resolution, from the patches as they leave
+        // the frame: what `lapflow render` does with the frame's state.
+        cur.raster = begin_raster(cur.mesh, cur.atlas, textures, o.raster, o.weights, locate);
+        draw_patches(cur.raster, patches);
+        st.seconds_draw = clock.lap();
+        close_holes(cur.raster, patches);
+        st.seconds_holes = clock.lap();
+        cur.textures = resolve_texels(cur.raster, patches);
+        st.seconds_resolve = clock.lap();
+        dilate_gutter(cur.raster, cur.textures);
+        st.seconds_dilate = clock.lap();
+      }
 
       // Step 10: the frame's files, under temporary names and renamed into
-      // place together, the OBJ last; its stats line follows.
-      record_frame_stats(cur, patches, st);
+      // place together, the OBJ last (the state, for `lapflow track`); its
+      // stats line follows.
+      record_frame_stats(cur, tracked, patches, st, !o.track_only);
       stop_if_asked(writer);
       writer.write(frame, patches, frame_clock.total());
       prev = frame;

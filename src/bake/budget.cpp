@@ -148,13 +148,17 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   // With background writing one more frame of images waits for the disk.
   if (o.background_write) e.atlas += n2 * (16 + 4 + (o.aov ? kAovTexelBytes : 0));
 
+  // The tracking atlas: its index and chart buffers, no image.
+  const double nt = double(tracking_resolution(area, r, o.track_texel));
+  e.tracking = nt * nt * (4 + kUtilization * kChartTexelBytes);
+
   e.meshes = kFramesInFlight * kTriangleBytes * double(s.triangles) * s.growth;
 
   const double pixels = double(s.color.width) * double(s.color.height);
   e.exemplar = s.color.decoded_bytes() + s.feature.decoded_bytes() + s.displacement.decoded_bytes() +
                pixels * kExemplarPixelBytes;
   e.base = kBaseBytes;
-  e.total = e.atlas + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
+  e.total = e.atlas + e.tracking + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
   return e;
 }
 
@@ -182,6 +186,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
   };
   const Part parts[] = {
       {e.atlas, fmt::format("--resolution {}: {} of atlas buffers", o.atlas.resolution, format_bytes(e.atlas))},
+      {e.tracking, fmt::format("--track-texel {:.3g} at --radius {:.3g} m: a {}x{} tracking atlas, {}", o.track_texel,
+                               o.patch.radius, tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
+                               tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
+                               format_bytes(e.tracking))},
       {e.patch_bytes + e.seeding,
        fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {}",
                    radius, e.patches, e.vertices_per_patch, o.seeding.spacing, o.patch.remesh_edge,

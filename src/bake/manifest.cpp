@@ -144,7 +144,22 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   s["max_hole_patches"] = text(o.raster.max_hole_patches);
   s["exr_type"] = text(int(o.exr.type));
   s["exr_compression"] = text(int(o.exr.compression));
+  s["track_texel"] = text(o.track_texel);
   return m;
+}
+
+std::string exemplar_feature_digest(const Image& feature) {
+  uLong crc = crc32(0, nullptr, 0);
+  const int32_t size[3] = {feature.width, feature.height, feature.channels};
+  crc = crc32(crc, reinterpret_cast<const Bytef*>(size), sizeof size);
+  // In slices: uInt is 32 bits.
+  const auto* bytes = reinterpret_cast<const Bytef*>(feature.pixels.data());
+  for (std::size_t left = feature.pixels.size() * sizeof(float); left > 0;) {
+    const std::size_t n = std::min<std::size_t>(left, std::size_t(1) << 30);
+    crc = crc32(crc, bytes, uInt(n));
+    bytes += n, left -= n;
+  }
+  return fmt::format("{:08x}", uint32_t(crc));
 }
 
 namespace {
@@ -194,13 +209,39 @@ void write_bake_manifest(const BakeManifest& m, const std::string& path) {
   write_text_atomically(path, manifest_json(m).dump(2) + "\n");
 }
 
-std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current) {
+namespace {
+
+/// The flattened keys of the options that change only the output images
+/// and UV mesh, not the patches (docs/farm.md): `lapflow render` may set
+/// them anew. The feature map counts through settings/feature_digest.
+bool output_only_key(const std::string& key) {
+  static const char* const keys[] = {"/exemplar/color", "/exemplar/feature", "/exemplar/displacement",
+                                     "/resolution", "/aov", "/dump_patches", "/settings/gutter",
+                                     "/settings/mipmap", "/settings/trilinear", "/settings/dilate",
+                                     "/settings/exr_type", "/settings/exr_compression"};
+  for (const char* k : keys)
+    if (key == k) return true;
+  return false;
+}
+
+nlohmann::json tracking_part(const nlohmann::json& flat) {
+  nlohmann::json t = nlohmann::json::object();
+  for (const auto& [key, value] : flat.items())
+    if (!output_only_key(key)) t[key] = value;
+  return t;
+}
+
+}  // namespace
+
+std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current,
+                                                   bool tracking_only) {
   const nlohmann::json was = read_manifest_json(path), now = manifest_json(current);
   if (!was.is_object() || !was.contains("lapflow_bake"))
     throw InputError(path, "not a lapflow bake manifest (no 'lapflow_bake')");
   // Both flattened to "/settings/gutter"-style keys, so a nested option is
   // named by itself.
-  const nlohmann::json a = was.flatten(), b = now.flatten();
+  nlohmann::json a = was.flatten(), b = now.flatten();
+  if (tracking_only) a = tracking_part(a), b = tracking_part(b);
   std::vector<std::string> differences;
   const auto shown = [](const nlohmann::json& j, const std::string& key) {
     return j.contains(key) ? j[key].dump() : std::string("(absent)");
@@ -215,6 +256,11 @@ std::vector<std::string> bake_manifest_differences(const std::string& path, cons
 
 uint32_t bake_manifest_checksum(const BakeManifest& m) {
   const std::string text = manifest_json(m).dump();
+  return uint32_t(crc32(0, reinterpret_cast<const Bytef*>(text.data()), uInt(text.size())));
+}
+
+uint32_t bake_tracking_checksum(const BakeManifest& m) {
+  const std::string text = tracking_part(manifest_json(m).flatten()).dump();
   return uint32_t(crc32(0, reinterpret_cast<const Bytef*>(text.data()), uInt(text.size())));
 }
 

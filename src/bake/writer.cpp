@@ -34,10 +34,15 @@ nlohmann::json stats_json(const FrameStats& s) {
           {"forced_texels", s.forced_texels},
           {"closed_texels", s.closed_texels},
           {"held_texels", s.held_texels},
+          {"tracking", {{"resolution", s.tracking.resolution}, {"texel_size", s.tracking.texel_size},
+                        {"utilization", s.tracking.utilization}, {"chart_texels", s.tracking.chart_texels},
+                        {"forced_texels", s.tracking.forced_texels}, {"closed_texels", s.tracking.closed_texels},
+                        {"held_texels", s.tracking.held_texels}}},
           {"seconds", {{"read", s.seconds_read}, {"advect", s.seconds_advect}, {"weights", s.seconds_weights},
                        {"seed", s.seconds_seed}, {"atlas", s.seconds_atlas}, {"raster", s.seconds_raster},
                        {"draw", s.seconds_draw}, {"holes", s.seconds_holes}, {"resolve", s.seconds_resolve},
                        {"retire", s.seconds_retire}, {"dilate", s.seconds_dilate}, {"write", s.seconds_write}, {"state", s.seconds_state},
+                       {"track", s.seconds_track},
                        {"total", s.seconds_total}}},
           {"peak_rss_mb", s.peak_rss_mb}};
 }
@@ -55,12 +60,13 @@ struct FrameWriter::Job {
 };
 
 FrameWriter::FrameWriter(const BakeOptions& options, const BakeManifest& names,
-                         std::function<void(const FrameStats&)> on_frame)
+                         std::function<void(const FrameStats&)> on_frame, bool stats_file)
     : options_(options),
       names_(names),
       on_frame_(std::move(on_frame)),
       stats_path_((fs::path(options.out_dir) / (options.name + ".stats.jsonl")).string()),
-      options_checksum_(bake_manifest_checksum(names)) {}
+      options_checksum_(bake_tracking_checksum(names)),
+      stats_file_(stats_file) {}
 
 void FrameWriter::resume(std::string stats_lines, int last_frame) {
   stats_text_ = std::move(stats_lines);
@@ -72,7 +78,7 @@ std::string FrameWriter::stats_line_without_timings(const FrameStats& stats) {
   FrameStats s = stats;
   s.seconds_read = s.seconds_advect = s.seconds_weights = s.seconds_seed = s.seconds_atlas = s.seconds_raster =
       s.seconds_write = s.seconds_total = 0;
-  s.seconds_state = 0;
+  s.seconds_state = s.seconds_track = 0;
   s.seconds_draw = s.seconds_holes = s.seconds_resolve = s.seconds_retire = s.seconds_dilate = 0;
   s.peak_rss_mb = 0;
   return stats_json(s).dump();
@@ -87,6 +93,13 @@ double FrameWriter::write_files(const Job& w) const {
   // Every file under a temporary name first; the frame appears only when
   // all of them are written (docs/bake.md, "When a frame is there").
   StagedFiles staged;
+  if (o.track_only) {
+    // `lapflow track`: the state is the frame.
+    const std::string state = names_.frame_file("state", f);
+    write_bake_state(state, w.state, &staged);
+    staged.commit(state);
+    return clock.lap();
+  }
   std::vector<std::function<void()>> jobs;
   jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr, &staged); });
   jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr, &staged); });
@@ -140,7 +153,7 @@ double FrameWriter::write_files(const Job& w) const {
 void FrameWriter::remove_old_state(int frame) const {
   // Only once this frame's state is in place: there is always one to resume from.
   const int keep = options_.keep_states;
-  if (keep <= 0) return;
+  if (keep <= 0 || options_.track_only) return;
   const std::vector<int>& frames = names_.frames;
   const auto at = std::find(frames.begin(), frames.end(), frame);
   if (at - frames.begin() < keep) return;
@@ -155,7 +168,7 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
   job->atlas = std::move(frame->atlas);
   job->surface = frame;
   if (options_.dump_patches) job->patches = patches;
-  if (options_.keep_states != 0) {
+  if (options_.keep_states != 0 || options_.track_only) {
     Stopwatch clock;
     BakeStateHeader header;
     header.name = options_.name;
@@ -180,8 +193,10 @@ void FrameWriter::finish() {
   // its files beyond the next frame's computation (frames sum to the bake).
   pending_stats_.seconds_total = pending_compute_seconds_ + wait.lap();
   pending_stats_.peak_rss_mb = peak_rss_mb();
-  stats_text_ += stats_json(pending_stats_).dump() + "\n";
-  write_text_atomically(stats_path_, stats_text_);
+  if (stats_file_) {
+    stats_text_ += stats_json(pending_stats_).dump() + "\n";
+    write_text_atomically(stats_path_, stats_text_);
+  }
   last_complete_frame_ = pending_stats_.frame;
   note_complete_frame(pending_stats_.frame);
   if (on_frame_) on_frame_(pending_stats_);

@@ -15,7 +15,10 @@ namespace lapflow::detail {
 
 class FrameWriter {
  public:
-  FrameWriter(const BakeOptions& options, const BakeManifest& names, std::function<void(const FrameStats&)> on_frame);
+  /// `stats_file`: append each frame's line to NAME.stats.jsonl (a render,
+  /// whose frames are written by many processes at once, keeps none).
+  FrameWriter(const BakeOptions& options, const BakeManifest& names, std::function<void(const FrameStats&)> on_frame,
+              bool stats_file = true);
   /// Takes the frame's textures and atlas (moved out of `frame`; the mesh is
   /// shared) and writes its files. `compute_seconds` is the wall time the
   /// frame took before writing. With BakeOptions::background_write the files
@@ -48,6 +51,7 @@ class FrameWriter {
   double pending_compute_seconds_ = 0;
   std::optional<int> last_complete_frame_;
   uint32_t options_checksum_ = 0;
+  bool stats_file_ = true;
 };
 
 }  // namespace lapflow::detail

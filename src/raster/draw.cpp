@@ -726,8 +726,8 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   // cores at once.
   parallel_for(3, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
-      if (k == 0) out.color = Image(N, N, 4);
-      if (k == 1) out.displacement = Image(N, N, 1);
+      if (k == 0 && options.images) out.color = Image(N, N, 4);
+      if (k == 1 && options.images) out.displacement = Image(N, N, 1);
       if (k == 2 && options.aov) out.aov = Image(N, N, 4);
     }
   }, 1);
@@ -856,7 +856,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
-          if (!blended) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
+          if (!blended && options.images) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
           // Only a texel whose 3x3 neighbourhood lies in its chart marks
           // (mark_held): near a seam the texels of two charts sample the same
           // surface at arbitrary offsets, and a cell marked from one chart
@@ -880,13 +880,15 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
         }
         ++run;
       }
-      if (blended) {
-        const int64_t* sum = &ctx.blend.sums[i * 5];
-        for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
+      if (options.images) {
+        if (blended) {
+          const int64_t* sum = &ctx.blend.sums[i * 5];
+          for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
+        }
+        float* c = &out.color.pixels[std::size_t(pix) * 4];
+        c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
+        out.displacement.pixels[pix] = s[3];
       }
-      float* c = &out.color.pixels[std::size_t(pix) * 4];
-      c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
-      out.displacement.pixels[pix] = s[3];
       if (options.aov)
         for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
     }

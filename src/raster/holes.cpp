@@ -205,6 +205,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
         closed += members.size();
         continue;
       }
+      if (!make_patch) continue;  // a render: births are the tracking's
       // The member nearest the centroid (ties: lowest texel index), then, for
       // holes wider than one patch, members in texel order 2r apart.
       std::sort(members.begin(), members.end());
@@ -228,6 +229,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       }
     }
     for (uint32_t i : open) label[i] = -1;
+    if (!make_patch) break;
     if (seeds.size() > max_patches - born) seeds.resize(max_patches - born);
 
     // Create in parallel (ids in seed order), append in seed order.
@@ -437,7 +439,11 @@ namespace lapflow {
 
 using namespace detail;
 
-void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker& make_patch) {
+namespace {
+
+/// fill_holes, and close_holes when `make_patch` is empty: then `patches`
+/// is only read.
+void fill_or_close_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker& make_patch) {
   RasterContext& ctx = *r.context;
   RasterStats& st = r.stats;
   const RasterOptions& options = ctx.options;
@@ -450,7 +456,7 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
   // test. It marks nothing in Patch::held, so the held region cannot creep.
   if (options.fill_holes) st.held_texels = close_held_texels(ctx, patches);
   ctx.newborn_from = patches.patches.size();
-  if (options.fill_holes && make_patch)
+  if (options.fill_holes)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {
     // The AOV winners (largest weight, ties to the oldest): a second raster
@@ -471,10 +477,24 @@ void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker
     // The small holes left to their neighbours are closed here too; what
     // else propagate_keys fills is forced.
     const std::size_t propagated = propagate_keys(ctx);
+    // A render (no maker) has no birth to wait for: whatever its neighbours
+    // close is closed, wherever the tracking's decisions left it open.
+    if (!make_patch) closed = propagated;
     st.closed_texels += std::min(closed, propagated);
     st.forced_texels += propagated - std::min(closed, propagated);
     st.forced_texels += cover_from_nearest_patch(ctx, patches);
   }
+}
+
+}  // namespace
+
+void fill_holes(RasterBuffers& r, PatchSet& patches, int frame, const PatchMaker& make_patch) {
+  fill_or_close_holes(r, patches, frame, make_patch);
+}
+
+void close_holes(RasterBuffers& r, const PatchSet& patches) {
+  // Without a maker nothing is appended and no field of `patches` written.
+  fill_or_close_holes(r, const_cast<PatchSet&>(patches), 0, {});
 }
 
 }  // namespace lapflow

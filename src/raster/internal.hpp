@@ -139,7 +139,9 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texe
 /// parallel, each drawn into the still-open texels. Returns patches born.
 /// Holes no wider than RasterOptions::small_hole x r (and not a whole chart)
 /// get no patch: they are left open for propagate_keys, and `closed` counts
-/// their texels.
+/// their texels. Without `make_patch` (a render of a tracked state) only the
+/// small holes are found and counted: nothing is born and `patches` is not
+/// changed.
 std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
                                 std::size_t max_patches, std::size_t& closed);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same

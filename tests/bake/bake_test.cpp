@@ -266,6 +266,8 @@ void expect_full_coverage_on_every_frame(const std::string& scene, double radius
     EXPECT_EQ(chart, s.chart_texels) << "frame " << s.frame;
     EXPECT_EQ(s.coverage, 1.0) << "frame " << s.frame;
     EXPECT_LE(double(s.forced_texels), 0.001 * double(s.chart_texels)) << "frame " << s.frame;
+    // Where hole filling decides, at the tracking resolution, too.
+    EXPECT_LE(double(s.tracking.forced_texels), 0.001 * double(s.tracking.chart_texels)) << "frame " << s.frame;
   }
 }
 }  // namespace

@@ -61,6 +61,18 @@ struct BakeOptions {
   /// The frames whose NAME.state.N.bin stays on disk: the last `keep_states`
   /// (-1: all of them, 0: none, and no resume is possible).
   int keep_states = 2;
+  /// The patch dynamics (coverage, holes, births, retirement: everything
+  /// that carries over to the next frame) are decided on an atlas of its
+  /// own whose texels measure about `track_texel` x r on the surface,
+  /// whatever the output --resolution (docs/farm.md, "Tracking
+  /// resolution"): a 1024^2 preview and a 6144^2 final show the same patches.
+  double track_texel = 1.0 / 32;
+  /// `lapflow track`: decide and write NAME.state.N.bin for every frame
+  /// (keep_states is ignored: all are kept), and no atlas image or UV mesh.
+  bool track_only = false;
+  /// Stop after this frame (a chunk of a farm's tracking chain); the
+  /// manifest still names every frame of `frames`.
+  std::optional<int> until_frame;
   // Stages
   uint64_t seed = 1;
   PatchOptions patch;                     ///< patch.radius = r in metres (0 = automatic)
@@ -70,6 +82,15 @@ struct BakeOptions {
   AtlasOptions atlas;                     ///< atlas.resolution 0 = automatic
   RasterOptions raster;
 };
+
+/// The gutter of the tracking atlas, in its texels: decisions need no colour
+/// dilation, only charts that do not touch.
+constexpr int kTrackingGutter = 2;
+
+/// The resolution of the tracking atlas of a frame whose surface has area
+/// `area`: texels of track_texel x radius on the surface at the packer's
+/// usual utilization (0.7), a multiple of 8 in [64, 16384].
+int tracking_resolution(double area, double radius, double track_texel);
 
 /// Where BakeOptions says the frames and their velocities come from.
 FrameSource frame_source(const BakeOptions& options);

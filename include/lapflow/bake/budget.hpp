@@ -35,6 +35,7 @@ struct BakeMemoryEstimate {
   double patches = 0;           ///< the population the estimate provisions for
   double vertices_per_patch = 0;
   double atlas = 0;             ///< per-texel buffers of the frames in flight
+  double tracking = 0;          ///< the tracking atlas's (BakeOptions::track_texel): index, texel maps, keys
   double patch_bytes = 0;       ///< the patch population
   double seeding = 0;           ///< Poisson-disk candidates (first frame, and the per-frame fresh count)
   double meshes = 0;            ///< the frames in flight: meshes, closest-point BVH, velocity band, atlas tables

@@ -58,6 +58,15 @@ struct FrameStats {
   std::size_t forced_texels = 0;          ///< chart texels given a neighbour's patch where hole filling failed
   std::size_t closed_texels = 0;          ///< chart texels of small holes closed by their neighbours
   std::size_t held_texels = 0;            ///< hole texels given back to the patch that held the point
+  /// The tracking raster (BakeOptions::track_texel), where births and
+  /// retirements are decided; the fields above are the output raster's
+  /// (zero for `lapflow track`, which draws no output).
+  struct Tracking {
+    int resolution = 0;
+    double texel_size = 0;               ///< metres per tracking texel on the surface (area-weighted mean)
+    std::size_t chart_texels = 0, forced_texels = 0, closed_texels = 0, held_texels = 0;
+    double utilization = 0;
+  } tracking;
   /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
   /// the atlas's own build time, on the read-ahead thread (so it overlaps
   /// the previous frame, except on the first); raster: draw, holes, resolve,
@@ -67,6 +76,7 @@ struct FrameStats {
   double seconds_read = 0, seconds_advect = 0, seconds_weights = 0, seconds_seed = 0, seconds_atlas = 0,
          seconds_raster = 0, seconds_write = 0, seconds_total = 0, seconds_state = 0;
   double seconds_draw = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0, seconds_dilate = 0;
+  double seconds_track = 0;  ///< the tracking raster (draw, holes, counts, retire), within `raster`
   double peak_rss_mb = 0;
   std::string velocity_source;
 };
@@ -106,7 +116,8 @@ struct Frame {
   std::unique_ptr<VelocityGrid> velocity_grid;    ///< with a VDB pattern
   VelocityField velocity;                         ///< after FrameSource's rules (band, min-speed)
   std::string velocity_source;                    ///< "vertex", "vdb:NAME", "zero", ...
-  SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas)
+  SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas): the output's
+  SurfaceAtlas tracking_atlas;                    ///< the same at the tracking resolution
   RasterBuffers raster;                           ///< steps 7-9 in progress
   FrameTextures textures;                         ///< the atlas images once resolved
   FrameStats stats;

@@ -59,11 +59,26 @@ void write_bake_manifest(const BakeManifest& manifest, const std::string& path);
 /// The options `current` and the manifest at `path` disagree on, one entry
 /// per key: "radius: 0.05 in the manifest, 0.04 now". Empty when they match.
 /// Throws InputError naming `path` when it cannot be read.
-std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current);
+/// With `tracking_only`, only the options that change the patches count:
+/// not the output's (exemplar paths, resolution, gutter, AOV, EXR
+/// settings, ...), which `lapflow render` may set anew.
+std::vector<std::string> bake_manifest_differences(const std::string& path, const BakeManifest& current,
+                                                   bool tracking_only = false);
 
 /// A checksum (CRC-32) of the manifest's options: a state file records the
 /// one of the bake that wrote it.
 uint32_t bake_manifest_checksum(const BakeManifest& manifest);
+/// The same over the options that change the patches only (see
+/// bake_manifest_differences): what a state file records, so that a render
+/// at another resolution or with another exemplar (of the same feature map)
+/// accepts it.
+uint32_t bake_tracking_checksum(const BakeManifest& manifest);
+
+/// A digest of the feature map as the bake uses it (size and pixels, after
+/// resampling to the colour's size): settings["feature_digest"], so that
+/// `lapflow render --exemplar` can tell that another exemplar erodes the
+/// same way.
+std::string exemplar_feature_digest(const Image& feature);
 
 /// Reads `path`, or the single *.bake.json in `path` when it is a folder
 /// (`name` picks one when there are several). Throws InputError naming the

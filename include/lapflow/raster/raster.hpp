@@ -40,6 +40,10 @@ struct RasterOptions {
   bool mipmap = true;         ///< exemplar lookups at the mip level of the atlas texel footprint (antialiasing)
   bool trilinear = true;      ///< blend the two nearest mip levels (false: nearest level, ~half the lookup cost)
   bool aov = true;            ///< fill FrameTextures::aov
+  /// Fill FrameTextures::color and displacement (false: resolve_texels only
+  /// counts the texels each patch won and marks Patch::held, as the
+  /// tracking raster needs; the images stay empty).
+  bool images = true;
   bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
   int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
   std::size_t max_hole_patches = 200000;  ///< guard on patches born per frame
@@ -189,6 +193,14 @@ void draw_patches(RasterBuffers& buffers, const PatchSet& patches);
 /// drawn into the still-open texels. Texels still open after that take a
 /// neighbour's patch (forced_texels).
 void fill_holes(RasterBuffers& buffers, PatchSet& patches, int frame, const PatchMaker& make_patch);
+
+/// Step 8 of a render of a tracked state (docs/farm.md): no patch is born.
+/// Held points go back to their patch, and every other open texel takes a
+/// neighbour's patch within its chart (closed_texels: the small holes the
+/// tracking closed, those narrower than a tracking texel, and the output's
+/// own sampling of the patches' eroded edges); only texels of a chart no
+/// patch reaches take the nearest patch in 3D (forced_texels).
+void close_holes(RasterBuffers& buffers, const PatchSet& patches);
 
 /// The atlas images: each chart texel's colour, displacement and AOV from
 /// the patch that keeps it, at its (u, v). Counts the texels each patch won.

@@ -1,0 +1,54 @@
+#pragma once
+/// \file render.hpp `lapflow render`: the output half of a bake, from the
+/// patch states that `lapflow track` (or a bake) wrote. Each frame is
+/// rasterized from its own NAME.state.N.bin, independently of the others,
+/// at any resolution and with any exemplar of the same feature map
+/// (docs/farm.md).
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/manifest.hpp"
+
+namespace lapflow {
+
+struct RenderOptions {
+  std::string dir;                        ///< the tracked folder (NAME.bake.json and the states)
+  std::string name;                       ///< picks the manifest when the folder holds several
+  std::optional<FrameRange> frames;       ///< every frame of the manifest when empty
+  int resolution = 0;                     ///< 0: the manifest's
+  std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< empty: the manifest's
+  std::string out_dir;                    ///< empty: `dir`
+  std::optional<bool> aov;                ///< the manifest's when empty
+  /// Skip a frame whose OBJ is already in out_dir from a render with the
+  /// same options (a re-submitted farm job).
+  bool skip_done = false;
+  std::size_t max_memory = 0;             ///< as BakeOptions::max_memory
+};
+
+/// What render() did with one frame.
+struct RenderedFrame {
+  int frame = 0;
+  bool skipped = false;  ///< already there (RenderOptions::skip_done)
+  int resolution = 0;    ///< the atlas's
+  FrameStats stats;      ///< counts and seconds of a rendered frame
+};
+
+/// The bake's options as a manifest records them (the inverse of
+/// make_bake_manifest, for the options it holds). Throws InputError naming
+/// the manifest when a setting does not read back.
+BakeOptions bake_options_from_manifest(const BakeManifest& manifest);
+
+/// Renders the frames of the tracked folder in `options.frames` whose state
+/// exists, writing NAME.N.obj + .mtl, NAME.color.N.exr, NAME.disp.N.exr (and
+/// NAME.aov.N.exr) into out_dir as `lapflow bake` would, each frame's files
+/// renamed into place together, the OBJ last; and NAME.bake.json there with
+/// the render's output options. Throws InputError naming the manifest, a
+/// state file (missing for a frame asked for: after the other frames are
+/// written; damaged; of another tracking) or the exemplar (its feature map
+/// differs from the tracked one), OutputError naming what cannot be
+/// written, Interrupted on SIGINT / SIGTERM between frames.
+void render(const RenderOptions& options, const std::function<void(const RenderedFrame&)>& on_frame = {});
+
+}  // namespace lapflow

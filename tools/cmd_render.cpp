@@ -1,0 +1,91 @@
+// `lapflow render`: atlases and UV meshes from the patch states of a tracked
+// folder, any frame on its own (docs/farm.md).
+#include "cli_common.hpp"
+#include "lapflow/bake/render.hpp"
+#include "lapflow/core/interrupt.hpp"
+
+namespace lapflow::cli {
+namespace {
+
+struct RenderCli {
+  RenderOptions o;
+  std::string frames;
+  std::string exemplar, feature, displacement;
+  bool aov = false, no_aov = false;
+};
+
+void run_render(RenderCli& c) {
+  apply_global_options();
+  RenderOptions& o = c.o;
+  if (!c.frames.empty()) o.frames = parse_frame_range(c.frames);
+  if (!c.exemplar.empty()) {
+    o.exemplar_color = c.exemplar;
+    o.exemplar_feature = c.feature;
+    o.exemplar_displacement = c.displacement;
+    resolve_exemplar_paths(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
+  } else if (!c.feature.empty() || !c.displacement.empty()) {
+    throw UsageError("--feature and --displacement go with --exemplar");
+  }
+  if (c.aov) o.aov = true;
+  if (c.no_aov) o.aov = false;
+  install_stop_handlers();
+  struct Restore {
+    ~Restore() { restore_stop_handlers(); }
+  } restore;
+  std::size_t rendered = 0, skipped = 0;
+  double seconds = 0;
+  render(o, [&](const RenderedFrame& f) {
+    if (f.skipped) {
+      ++skipped;
+      info("frame {}: already rendered, skipped", f.frame);
+      return;
+    }
+    ++rendered;
+    seconds += f.stats.seconds_total;
+    const FrameStats& s = f.stats;
+    info("frame {}: {} tris, {} patches, {}x{} atlas, coverage {:.2f}% ({} texels closed by neighbours, {} forced), "
+         "{:.2f}s",
+         s.frame, s.triangles, s.patches_alive, f.resolution, f.resolution, 100 * s.coverage,
+         s.closed_texels, s.forced_texels, s.seconds_total);
+  });
+  info("done: {} frames rendered in {:.1f} s{}, peak memory {:.0f} MiB", rendered, seconds,
+       skipped ? fmt::format(", {} already there", skipped) : "", peak_rss_mb());
+}
+
+}  // namespace
+
+void add_render_command(CLI::App& app) {
+  static RenderCli c;
+  CLI::App* cmd = app.add_subcommand("render", "Atlases and UV meshes from the patch states of a tracked folder");
+  cmd->description(
+      "Renders frames of a folder that `lapflow track` (or `lapflow bake`) wrote: for each frame asked for whose\n"
+      "NAME.state.N.bin exists, reads its mesh again, builds its atlas and rasterizes the frame's patches into\n"
+      "NAME.color.N.exr, NAME.disp.N.exr (NAME.aov.N.exr with --aov) and NAME.N.obj + .mtl, renamed into place\n"
+      "together, the OBJ last. Frames are independent: run any range anywhere, in any order, at once. No patch is\n"
+      "born: holes finer than a tracking texel are closed by their neighbours (counted). The output options\n"
+      "default to the manifest's; another --resolution gives the same patches, and another --exemplar with the\n"
+      "same feature map the same animation. Writes NAME.bake.json with the render's options into --out.\n\n"
+      "Exit codes: 0 ok, 2 bad input (the message names the file: a missing or damaged state, a feature map\n"
+      "other than the tracked one), usage or output problem, 130 / 143 stopped by SIGINT / SIGTERM, 1 internal.");
+  cmd->add_option("dir", c.o.dir, "The tracked folder (NAME.bake.json and NAME.state.N.bin)")->required();
+  cmd->add_option("--name", c.o.name, "The bake's NAME when the folder holds several");
+  cmd->add_option("--frames", c.frames, "Frame range C-D (default: every frame of the manifest)");
+  cmd->add_option("--resolution", c.o.resolution, "Atlas width = height in texels (default: the manifest's)")
+      ->check(CLI::Range(16, 32768));
+  cmd->add_option("--exemplar", c.exemplar,
+                  "Colour exemplar, or a shipped one's name (default: the manifest's). Its feature map must be "
+                  "the tracked one");
+  cmd->add_option("--feature", c.feature, "Feature map of --exemplar (default: NAME.feature.* beside it)");
+  cmd->add_option("--displacement", c.displacement, "Displacement map of --exemplar");
+  cmd->add_option("--out", c.o.out_dir, "Output folder (default: the tracked folder)");
+  cmd->add_flag("--aov", c.aov, "Also write NAME.aov.N.exr (default: as the manifest says)");
+  cmd->add_flag("--no-aov", c.no_aov, "Do not write NAME.aov.N.exr");
+  cmd->add_flag("--skip-done", c.o.skip_done,
+                "Skip a frame whose OBJ is already in --out from a render with the same options, newer than its "
+                "state (a re-submitted farm job)");
+  add_max_memory_option(*cmd, c.o.max_memory, "The render's memory estimate must fit");
+  add_global_options(*cmd);
+  cmd->callback([] { run_render(c); });
+}
+
+}  // namespace lapflow::cli
