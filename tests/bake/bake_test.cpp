@@ -3,6 +3,7 @@
 // bad input that never damages earlier frames.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -23,7 +24,9 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path fresh_dir(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + name);
+  // Per process: two test runs on one machine (two build folders) must not
+  // share a folder.
+  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
