@@ -104,5 +104,7 @@ void add_eval_command(CLI::App& app);
 void preview_bake(const std::string& dir, int width, int height);
 void add_preview_command(CLI::App& app);
 void add_feature_map_command(CLI::App& app);
+/// `lapflow farm slurm|status` (cmd_farm.cpp).
+void add_farm_command(CLI::App& app);
 
 }  // namespace lapflow::cli

@@ -40,11 +40,14 @@ int main(int argc, char** argv) {
   cli::add_eval_command(app);
   cli::add_preview_command(app);
   cli::add_feature_map_command(app);
+  cli::add_farm_command(app);
   try {
     // `lapflow bake scene.toml [options]`: the file's keys become options
     // placed before the user's, so the command line overrides the file.
+    // `lapflow farm slurm scene.toml ...` hands the scene file on to its
+    // jobs as it is, and reads it itself (cmd_farm.cpp).
     std::vector<std::string> args(argv + 1, argv + argc);
-    cli::expand_scene_files(args);
+    if (args.empty() || args[0] != "farm") cli::expand_scene_files(args);
     std::reverse(args.begin(), args.end());  // CLI11 takes the vector in reverse order
     app.parse(args);
   } catch (const CLI::ParseError& e) {

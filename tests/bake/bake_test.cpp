@@ -3,6 +3,7 @@
 // bad input that never damages earlier frames.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -23,13 +24,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// A folder of its own per test name and per source tree: suites of two
-/// worktrees running at once on one machine must not bake into (and delete)
-/// each other's folders. The same tree reuses its folder, so runs do not pile
-/// up in the temp dir.
+/// A folder of its own per test name and per build folder (a hash of its
+/// lapflow binary's path): two test runs on one machine (two worktrees, or
+/// two build folders of one tree) must not bake into, and delete, each
+/// other's folders. A build folder's next run reuses and clears its own, so
+/// runs do not pile up in the temp dir (the every-frame bakes leave 0.45 GB).
 fs::path fresh_dir(const std::string& name) {
-  const std::string tree = fmt::format("{:08x}", std::hash<std::string>{}(LAPFLOW_SOURCE_DIR) & 0xffffffffu);
-  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + tree + "_" + name);
+  const std::string build = fmt::format("{:08x}", std::hash<std::string>{}(LAPFLOW_BINARY) & 0xffffffffu);
+  const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + build + "_" + name);
   fs::remove_all(d);
   fs::create_directories(d);
   return d;

@@ -1,0 +1,57 @@
+// `lapflow track` and `lapflow render` as processes: a scene file and options
+// as for bake; a render of a frame without a state, of a folder without a
+// manifest, or with another feature map is exit 2 naming the file.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "io_test_helpers.hpp"
+#include "lapflow/addons/demo_scene.hpp"
+#include "lapflow/io/mesh_io.hpp"
+
+using namespace lapflow;
+using lapflow::test::TempDir;
+namespace fs = std::filesystem;
+
+TEST(RenderCli, TrackThenRenderAndTheirErrors) {
+  TempDir meshes("render_cli_in"), out("render_cli_out"), scratch("render_cli_scratch");
+  DemoOptions demo;
+  demo.voxel_size = 1.0 / 32;
+  for (int f = 1; f <= 3; ++f) write_ply(fmt::format("{}/m.{:04d}.ply", meshes.str(), f), demo_frame(demo, f));
+  // A scene file, as bake takes it.
+  const std::string scene = meshes / "shot.toml";
+  test::write_bytes(scene, fmt::format("mesh = \"m.%04d.ply\"\nexemplar = \"{}/exemplars/pebbles.color.png\"\n"
+                                       "resolution = 96\nradius = 0.05\nname = \"t\"\n",
+                                       LAPFLOW_SOURCE_DIR));
+  const std::string lapflow = LAPFLOW_BINARY;
+  std::string err;
+  ASSERT_EQ(test::run_command(fmt::format("'{}' track '{}' --out '{}' --until 2 --quiet", lapflow, scene, out.str()),
+                              nullptr, &err, scratch),
+            0)
+      << err;
+  EXPECT_TRUE(fs::exists(out / "t.state.0002.bin"));
+  EXPECT_FALSE(fs::exists(out / "t.state.0003.bin"));
+  EXPECT_FALSE(fs::exists(out / "t.0001.obj"));
+
+  // Frame 3 has no state: frames 1-2 are rendered, then exit 2 naming it.
+  EXPECT_EQ(test::run_command(fmt::format("'{}' render '{}' --frames 1-3 --quiet", lapflow, out.str()), nullptr, &err,
+                              scratch),
+            2);
+  EXPECT_NE(err.find("t.state.0003.bin"), std::string::npos) << err;
+  EXPECT_TRUE(fs::exists(out / "t.0002.obj"));
+  EXPECT_FALSE(fs::exists(out / "t.0003.obj"));
+
+  // Another feature map: exit 2 naming it; nothing of frame 1 is touched.
+  const std::string before = test::read_bytes(out / "t.color.0001.exr");
+  EXPECT_EQ(test::run_command(fmt::format("'{}' render '{}' --frames 1 --exemplar lava --quiet", lapflow, out.str()),
+                              nullptr, &err, scratch),
+            2);
+  EXPECT_NE(err.find("lava.feature.png"), std::string::npos) << err;
+  EXPECT_TRUE(test::read_bytes(out / "t.color.0001.exr") == before);
+
+  // A folder with no manifest.
+  EXPECT_EQ(test::run_command(fmt::format("'{}' render '{}' --quiet", lapflow, scratch.str()), nullptr, &err, scratch),
+            2);
+  EXPECT_NE(err.find(scratch.str()), std::string::npos) << err;
+}
