@@ -151,8 +151,8 @@ int bake_splash(const std::string& data, int resolution) {
   o.patch.radius = 0.028;
   resolve_bake_options(o);
   fmt::print("splash 1-48, foam, r = 0.028, {}^2, {} threads\n\n", resolution, thread_count());
-  fmt::print("| frame | triangles | charts | patches | advect s | weights s | atlas s (ahead) | draw s | holes s | resolve s | "
-             "retire s | dilate s | write s (behind) | wall s | RSS MiB |\n");
+  fmt::print("| frame | triangles | charts | patches | advect s | weights s | atlas s (ahead) | track s | draw s | holes s | "
+             "resolve s | dilate s | write s (behind) | wall s | RSS MiB |\n");
   fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   Stopwatch clock;
@@ -163,7 +163,7 @@ int bake_splash(const std::string& data, int resolution) {
     fmt::print("| {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | "
                "{:.0f} |\n",
                s.frame, s.triangles, s.charts, s.patches_alive, s.seconds_advect, s.seconds_weights, s.seconds_atlas,
-               s.seconds_draw, s.seconds_holes, s.seconds_resolve, s.seconds_retire, s.seconds_dilate, s.seconds_write,
+               s.seconds_track, s.seconds_draw, s.seconds_holes, s.seconds_resolve, s.seconds_dilate, s.seconds_write,
                wall.back(), rss.back());
     std::fflush(stdout);
   });
