@@ -18,8 +18,20 @@
 
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/bake/bake.hpp"
+#include "lapflow/core/errors.hpp"
 
 namespace lapflow::test {
+
+/// The message of the InputError `f` throws ("" when it throws none).
+template <class F>
+std::string input_error_of(F&& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
 
 /// A fresh folder under the system temp dir, removed with everything in it.
 class TempDir {

@@ -11,6 +11,7 @@
 
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/vec.hpp"
 
 namespace lapflow::cli {
@@ -30,6 +31,17 @@ void add_global_options(CLI::App& cmd);
 /// `--max-memory SIZE` (16G, 500M, bytes; default 80% of physical memory)
 /// into `bytes`, with `what` saying what the command refuses beyond it.
 CLI::Option* add_max_memory_option(CLI::App& cmd, std::size_t& bytes, const std::string& what);
+
+/// While it lives, SIGINT / SIGTERM stop a bake or render between frames
+/// (exit 130 / 143), a second one at once (install_stop_handlers); the
+/// default handlers come back after it, so that a command going on to other
+/// work (`lapflow demo` renders previews) stops on Ctrl-C as usual.
+struct StopHandlersScope {
+  StopHandlersScope() { lapflow::install_stop_handlers(); }
+  ~StopHandlersScope() { lapflow::restore_stop_handlers(); }
+  StopHandlersScope(const StopHandlersScope&) = delete;
+  StopHandlersScope& operator=(const StopHandlersScope&) = delete;
+};
 
 /// `--remesher lattice|isotropic|cgal` (the old names `grid` and `fast` are
 /// accepted too), shared by bake and patches.

@@ -14,12 +14,9 @@
 namespace lapflow::cli {
 
 void bake_with_progress(BakeOptions& o) {
-  // From here a SIGINT / SIGTERM stops the bake between frames (exit 130 /
-  // 143), and a second one at once; neither leaves a half file.
-  install_stop_handlers();
-  struct Restore {
-    ~Restore() { restore_stop_handlers(); }
-  } restore;  // `lapflow demo` goes on to render previews: Ctrl-C must stop it as usual
+  // From here a SIGINT / SIGTERM stops the bake between frames; neither
+  // leaves a half file.
+  const StopHandlersScope stop_handlers;
   const BakeMemoryEstimate memory = resolve_bake_options(o);
 
   const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);

@@ -28,10 +28,7 @@ void run_render(RenderCli& c) {
   }
   if (c.aov) o.aov = true;
   if (c.no_aov) o.aov = false;
-  install_stop_handlers();
-  struct Restore {
-    ~Restore() { restore_stop_handlers(); }
-  } restore;
+  const StopHandlersScope stop_handlers;
   std::size_t rendered = 0, skipped = 0;
   double seconds = 0;
   render(o, [&](const RenderedFrame& f) {

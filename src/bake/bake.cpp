@@ -21,6 +21,7 @@
 #include "bake/writer.hpp"
 #include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/render.hpp"
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
@@ -107,15 +108,13 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
 namespace {
 
 /// The counts of a frame that its stages leave in the frame, the tracking
-/// raster and the patches; `rendered`: the frame has output images.
+/// raster and the patches; `rendered`: render_frame drew the output.
 void record_frame_stats(const Frame& frame, const RasterStats& tracking, const PatchSet& patches, FrameStats& st,
                         bool rendered) {
   st.frame = frame.number;
   st.triangles = frame.mesh.triangle_count();
   st.vertices = frame.mesh.vertex_count();
   st.velocity_source = frame.velocity_source;
-  st.charts = frame.tracking_atlas.chart_count;
-  st.seconds_raster = st.seconds_track + st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
   // Births and deaths: the tracking raster's decisions.
   const RasterStats& t = tracking;
   st.patches_born += t.patches_born;
@@ -132,18 +131,11 @@ void record_frame_stats(const Frame& frame, const RasterStats& tracking, const P
   st.tracking.held_texels = t.held_texels;
   st.tracking.utilization = frame.tracking_atlas.report.utilization;
   if (!rendered) {
+    // `lapflow track`: no output raster (render_frame fills these otherwise).
+    st.charts = frame.tracking_atlas.chart_count;
     st.coverage = t.chart_texels ? double(t.covered_texels) / double(t.chart_texels) : 1.0;
-    return;  // `lapflow track`: no output raster
+    st.seconds_raster = st.seconds_track;
   }
-  // Coverage: the output's.
-  st.charts = frame.atlas.chart_count;
-  st.utilization = frame.atlas.report.utilization;
-  const RasterStats& r = frame.raster.stats;
-  st.chart_texels = r.chart_texels;
-  st.forced_texels = r.forced_texels;
-  st.closed_texels = r.closed_texels;
-  st.held_texels = r.held_texels;
-  st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
 }
 
 /// --out: created when missing, a writable folder, and rid of the temporary
@@ -222,12 +214,7 @@ ResumePoint find_resume_point(const BakeOptions& o, const BakeManifest& current)
   const int frame = frames[std::size_t(point.index)];
   const std::string path = current.frame_file("state", frame);
   point.state = read_bake_state(path);
-  const BakeStateHeader& h = point.state.header;
-  if (h.name != o.name || h.frame != frame)
-    throw InputError(path, "the state is of bake '" + h.name + "' frame " + std::to_string(h.frame) +
-                               ", not of '" + o.name + "' frame " + std::to_string(frame));
-  if (h.options_checksum != bake_tracking_checksum(current))
-    throw InputError(path, "the state was written by a bake with other options than NAME.bake.json's");
+  check_bake_state(point.state, path, current, frame);
   return point;
 }
 
@@ -251,6 +238,43 @@ std::string stats_lines_until(const BakeOptions& o, const BakeManifest& names, c
 }
 
 }  // namespace
+
+void check_bake_state(const BakeState& state, const std::string& path, const BakeManifest& manifest, int frame) {
+  const BakeStateHeader& h = state.header;
+  if (h.name != manifest.name || h.frame != frame)
+    throw InputError(path, "the state is of bake '" + h.name + "' frame " + std::to_string(h.frame) +
+                               ", not of '" + manifest.name + "' frame " + std::to_string(frame));
+  if (h.options_checksum != bake_tracking_checksum(manifest))
+    throw InputError(path, "the state was written with other options than " +
+                               fs::path(bake_manifest_path(manifest.dir, manifest.name)).filename().string() +
+                               "'s");
+}
+
+void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& exemplar, const BakeOptions& o) {
+  FrameStats& st = frame.stats;
+  Stopwatch clock;
+  RasterOptions output = o.raster;
+  output.mark_held = false;  // nothing retires here: the tracking marked the cells
+  frame.raster = begin_raster(frame.mesh, frame.atlas, exemplar, output, o.weights,
+                              surface_triangle_locator(*frame.surface, o.raster.radius));
+  draw_patches(frame.raster, patches);
+  st.seconds_draw = clock.lap();
+  close_holes(frame.raster, patches);
+  st.seconds_holes = clock.lap();
+  frame.textures = resolve_texels(frame.raster, patches);
+  st.seconds_resolve = clock.lap();
+  const RasterStats& r = frame.raster.stats;
+  st.charts = frame.atlas.chart_count;
+  st.utilization = frame.atlas.report.utilization;
+  st.chart_texels = r.chart_texels;
+  st.forced_texels = r.forced_texels;
+  st.closed_texels = r.closed_texels;
+  st.held_texels = r.held_texels;
+  st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
+  dilate_gutter(frame.raster, frame.textures);
+  st.seconds_dilate = clock.lap();
+  st.seconds_raster = st.seconds_track + st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
+}
 
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
   const FramePattern meshes(o.mesh_pattern);
@@ -333,19 +357,9 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       }
       st.seconds_track = clock.lap();
 
-      if (!o.track_only) {
-        // The output at its own resolution, from the patches as they leave
-        // the frame: what `lapflow render` does with the frame's state.
-        cur.raster = begin_raster(cur.mesh, cur.atlas, textures, o.raster, o.weights, locate);
-        draw_patches(cur.raster, patches);
-        st.seconds_draw = clock.lap();
-        close_holes(cur.raster, patches);
-        st.seconds_holes = clock.lap();
-        cur.textures = resolve_texels(cur.raster, patches);
-        st.seconds_resolve = clock.lap();
-        dilate_gutter(cur.raster, cur.textures);
-        st.seconds_dilate = clock.lap();
-      }
+      // The output at its own resolution, from the patches as they leave the
+      // frame: what `lapflow render` does with the frame's state.
+      if (!o.track_only) render_frame(cur, patches, textures, o);
 
       // Step 10: the frame's files, under temporary names and renamed into
       // place together, the OBJ last (the state, for `lapflow track`); its

@@ -62,14 +62,29 @@ FrameInput read_frame_input(const FrameSource& source, int frame) {
   return in;
 }
 
-std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame) {
-  FrameInput in = read_frame_input(source, frame);
+namespace {
+
+std::unique_ptr<Frame> frame_from_input(FrameInput in) {
   auto f = std::make_unique<Frame>();
-  f->number = frame;
+  f->number = in.number;
   f->path = std::move(in.path);
   f->mesh = std::move(in.mesh);
   f->surface = std::make_unique<SurfaceQuery>(f->mesh);
   f->velocity_grid = std::move(in.grid);
+  return f;
+}
+
+}  // namespace
+
+std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame) {
+  FrameSource meshes_only = source;
+  meshes_only.velocity_vdb_pattern.clear();
+  meshes_only.allow_zero_velocity = true;
+  return frame_from_input(read_frame_input(meshes_only, frame));
+}
+
+std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame) {
+  std::unique_ptr<Frame> f = frame_from_input(read_frame_input(source, frame));
   if (f->velocity_grid) {
     f->velocity = grid_velocity_field(*f->velocity_grid);
     f->velocity_source = "vdb:" + f->velocity_grid->grid_name();

@@ -152,7 +152,6 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
 void render(const RenderOptions& r, const std::function<void(const RenderedFrame&)>& on_frame) {
   const BakeManifest tracked = read_bake_manifest(r.dir, r.name);
   const std::string tracked_path = bake_manifest_path(tracked.dir, tracked.name);
-  const uint32_t tracking_checksum = bake_tracking_checksum(tracked);
   BakeOptions o = bake_options_from_manifest(tracked);
   if (!r.exemplar_color.empty()) {
     o.exemplar_color = r.exemplar_color;
@@ -210,16 +209,11 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
       same_options = false;  // a damaged manifest: render again
     }
   }
-  if (bake_tracking_checksum(out) != tracking_checksum) {
-    write_bake_manifest(out, out_path + ".mismatch");
+  if (bake_tracking_checksum(out) != bake_tracking_checksum(tracked))
     throw std::logic_error("render: the output manifest changed the tracking's options");
-  }
   write_bake_manifest(out, out_path);
 
-  // Only the meshes are read: the tracking used their velocity.
-  FrameSource source = frame_source(o);
-  source.velocity_vdb_pattern.clear();
-  source.allow_zero_velocity = true;
+  const FrameSource source = frame_source(o);  // meshes only (load_frame_surface)
   std::vector<std::string> missing;
   detail::FrameWriter writer(
       o, out, [&](const FrameStats& written) { if (on_frame) on_frame({written.frame, false, o.atlas.resolution, written}); },
@@ -239,50 +233,20 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
       throw Interrupted(signal, writer.last_complete_frame());
     }
     Stopwatch frame_clock, clock;
-    BakeState state = read_bake_state(state_path);
-    const BakeStateHeader& h = state.header;
-    if (h.name != tracked.name || h.frame != f)
-      throw InputError(state_path, "the state is of bake '" + h.name + "' frame " + std::to_string(h.frame) +
-                                       ", not of '" + tracked.name + "' frame " + std::to_string(f));
-    if (h.options_checksum != bake_tracking_checksum(tracked))
-      throw InputError(state_path, "the state was written by a tracking with other options than " + tracked_path +
-                                       "'s");
-    FrameInput in = read_frame_input(source, f);
-    auto frame = std::make_shared<Frame>();
-    frame->number = f;
-    frame->path = std::move(in.path);
-    frame->mesh = std::move(in.mesh);
-    frame->surface = std::make_unique<SurfaceQuery>(frame->mesh);
+    const BakeState state = read_bake_state(state_path);
+    check_bake_state(state, state_path, tracked, f);
+    const PatchSet& patches = state.patches;
+    const std::shared_ptr<Frame> frame = load_frame_surface(source, f);
     FrameStats& st = frame->stats;
     st.seconds_read = clock.lap();
     frame->atlas = build_surface_atlas(frame->mesh, o.atlas);
     st.seconds_atlas = clock.lap();
-    // As the bake draws its output: the frame's patches, no birth; holes
-    // finer than a tracking texel are closed by their neighbours.
-    const PatchSet& patches = state.patches;
-    frame->raster = begin_raster(frame->mesh, frame->atlas, textures, o.raster, o.weights,
-                                 surface_triangle_locator(*frame->surface, o.raster.radius));
-    draw_patches(frame->raster, patches);
-    st.seconds_draw = clock.lap();
-    close_holes(frame->raster, patches);
-    st.seconds_holes = clock.lap();
-    frame->textures = resolve_texels(frame->raster, patches);
-    st.seconds_resolve = clock.lap();
-    const RasterStats& rs = frame->raster.stats;
+    // As the bake draws its output: the frame's patches, no birth.
+    render_frame(*frame, patches, textures, o);
     st.frame = f;
     st.triangles = frame->mesh.triangle_count();
     st.vertices = frame->mesh.vertex_count();
-    st.charts = frame->atlas.chart_count;
-    st.utilization = frame->atlas.report.utilization;
     st.patches_alive = patches.patches.size();
-    st.chart_texels = rs.chart_texels;
-    st.forced_texels = rs.forced_texels;
-    st.closed_texels = rs.closed_texels;
-    st.held_texels = rs.held_texels;
-    st.coverage = rs.chart_texels ? double(rs.covered_texels) / double(rs.chart_texels) : 1.0;
-    dilate_gutter(frame->raster, frame->textures);
-    st.seconds_dilate = clock.lap();
-    st.seconds_raster = st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
     writer.write(frame, patches, frame_clock.total());  // on disk when it returns, then on_frame
   }
   writer.finish();

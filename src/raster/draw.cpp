@@ -750,7 +750,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   };
   // Patch::held for the next frame (below, per won texel). Bits are or-ed:
   // the result does not depend on the order.
-  const bool hold = ctx.hold;
+  const bool hold = ctx.hold && options.mark_held;
   if (hold) ctx.held_next.assign(patches.patches.size() * kHeldWords, 0);
   else ctx.held_next.clear();
   // A texel won by the test marks the cells that lie wholly inside its

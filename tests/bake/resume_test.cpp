@@ -26,6 +26,7 @@
 
 using namespace lapflow;
 using lapflow::test::TempDir;
+using lapflow::test::input_error_of;
 namespace fs = std::filesystem;
 
 namespace {
@@ -88,17 +89,6 @@ std::vector<int> frames_from(int first) {
   std::vector<int> f;
   for (int i = first; i <= kFrames; ++i) f.push_back(i);
   return f;
-}
-
-/// The InputError message `f` throws ("" when it throws none).
-template <class F>
-std::string input_error_of(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 class BakeResume : public ::testing::Test {

@@ -22,6 +22,7 @@
 
 using namespace lapflow;
 using lapflow::test::TempDir;
+using lapflow::test::input_error_of;
 namespace fs = std::filesystem;
 
 namespace {
@@ -34,17 +35,6 @@ BakeOptions small_bake(const std::string& meshes, const std::string& out, int re
   o.keep_states = -1;
   resolve_bake_options(o);
   return o;
-}
-
-/// The message of the InputError `f` throws ("" when none).
-template <class F>
-std::string input_error_of(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 class TrackRender : public ::testing::Test {

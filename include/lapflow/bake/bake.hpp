@@ -117,6 +117,15 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& options);
 /// asks to stop: checked before each frame and before writing one.
 void bake(const BakeOptions& options, const std::function<void(const FrameStats&)>& on_frame = {});
 
+/// The output of one frame from the patches as they leave it, as `bake` and
+/// `lapflow render` both draw it (docs/farm.md): the frame's output atlas
+/// must be built. Draws the patches at the output resolution, closes the
+/// holes without births (close_holes), resolves the images into
+/// frame.textures and dilates the gutter. Fills the output's part of
+/// frame.stats: draw, holes, resolve, dilate and raster seconds, charts,
+/// utilization, chart, forced, closed and held texels, coverage.
+void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& exemplar, const BakeOptions& options);
+
 /// Peak resident memory of this process so far, in MiB.
 double peak_rss_mb();
 

@@ -127,5 +127,8 @@ struct Frame {
 /// velocity field under `source`'s rules. The atlas and the rest are the
 /// stages' to fill. Throws InputError naming the file and frame.
 std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame);
+/// The same without the velocity (`lapflow render`): the mesh and the
+/// closest-point structure only.
+std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame);
 
 }  // namespace lapflow

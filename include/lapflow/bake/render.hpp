@@ -35,6 +35,14 @@ struct RenderedFrame {
   FrameStats stats;      ///< counts and seconds of a rendered frame
 };
 
+struct BakeState;  // lapflow/bake/state.hpp
+
+/// A state `path` read for frame `frame` of the bake in `manifest` is that
+/// bake's, of that frame, with the manifest's tracking options
+/// (bake_tracking_checksum): what `--resume` and `lapflow render` check
+/// before they use it. Throws InputError naming `path`.
+void check_bake_state(const BakeState& state, const std::string& path, const BakeManifest& manifest, int frame);
+
 /// The bake's options as a manifest records them (the inverse of
 /// make_bake_manifest, for the options it holds). Throws InputError naming
 /// the manifest when a setting does not read back.

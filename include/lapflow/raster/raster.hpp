@@ -44,6 +44,11 @@ struct RasterOptions {
   /// counts the texels each patch won and marks Patch::held, as the
   /// tracking raster needs; the images stay empty).
   bool images = true;
+  /// Mark the cells each patch won for Patch::held (read by retire_patches).
+  /// false: an output drawn from a tracked state, which retires nothing
+  /// (render_frame); the hold's test still reads the cells the tracking
+  /// marked.
+  bool mark_held = true;
   bool dilate = true;         ///< fill texels outside charts from the nearest chart texel
   int gutter = 4;             ///< texels dilated by 8-neighbour passes; farther texels take a row/column nearest fill
   std::size_t max_hole_patches = 200000;  ///< guard on patches born per frame
