@@ -343,16 +343,22 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       // rasterization, the oldest non-eroded patch per texel; new patches at
       // the holes' centres; the texels each patch won; retirement. Patches
       // and their held cells then carry over to the next frame.
-      const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
       RasterStats tracked;
       {
+        Stopwatch step;
+        const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
         RasterBuffers t = begin_raster(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights, locate);
+        st.tracking.seconds_setup = step.lap();
         draw_patches(t, patches);
+        st.tracking.seconds_draw = step.lap();
         const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
         fill_holes(t, patches, cur.number,
                    surface_patch_maker(*cur.surface, adjacency, o.patch, o.weights, cur.number));
+        st.tracking.seconds_holes = step.lap();
         resolve_texels(t, patches);
+        st.tracking.seconds_resolve = step.lap();
         retire_patches(t, patches);
+        st.tracking.seconds_retire = step.lap();
         tracked = std::move(t.stats);
       }
       st.seconds_track = clock.lap();

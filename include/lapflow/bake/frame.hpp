@@ -66,6 +66,10 @@ struct FrameStats {
     double texel_size = 0;               ///< metres per tracking texel on the surface (area-weighted mean)
     std::size_t chart_texels = 0, forced_texels = 0, closed_texels = 0, held_texels = 0;
     double utilization = 0;
+    /// Wall seconds of its steps: setup (the triangle locator and the
+    /// raster's buffers), draw, holes (births and closed holes), resolve
+    /// (the texels won and the held cells) and retire (with the merge test).
+    double seconds_setup = 0, seconds_draw = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0;
   } tracking;
   /// Wall seconds per stage. read: the wait for the frame read ahead; atlas:
   /// the atlas's own build time, on the read-ahead thread (so it overlaps
