@@ -9,6 +9,7 @@
 //   lapflow_bench raster [N...]   the rasterizer alone at the given resolutions
 //   lapflow_bench atlas [DATA]    the surface atlas alone
 //   lapflow_bench patches [DATA]  the patch stages alone
+//   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
 #include <fmt/format.h>
 
 #include <cmath>
@@ -208,6 +209,10 @@ int main(int argc, char** argv) {
   }
   if (!args.empty() && args[0] == "atlas") {
     bench::bench_atlas(args.size() > 1 ? args[1] : data);
+    return 0;
+  }
+  if (!args.empty() && args[0] == "obj") {
+    bench::bench_obj(args.size() > 1 ? args[1] : data);
     return 0;
   }
   if (!args.empty() && args[0] == "patches") {

@@ -27,7 +27,7 @@ void bake_with_progress(BakeOptions& o) {
        thread_count_label());
   info("  memory estimate {} (atlas {}, tracking {}, {:.0f} patches {}, meshes {}, exemplar {}) of --max-memory {}",
        format_bytes(memory.total), format_bytes(memory.atlas), format_bytes(memory.tracking), memory.patches,
-       format_bytes(memory.patch_bytes + memory.seeding), format_bytes(memory.meshes), format_bytes(memory.exemplar),
+       format_bytes(memory.patch_bytes + memory.state + memory.seeding), format_bytes(memory.meshes), format_bytes(memory.exemplar),
        format_bytes(double(o.max_memory > 0 ? o.max_memory : default_memory_budget())));
   Progress progress(verb, frames.size());
   double seconds = 0;

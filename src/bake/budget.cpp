@@ -60,6 +60,13 @@ constexpr double kPatchVertexBytes = 1.5 * 53, kPatchTriangleBytes = 1.5 * 20;
 // per-patch tables. With the lattice's 204 vertices a patch comes to 32 KiB;
 // measured: 33 KiB per patch alive (dam_break, radius 0.01 against the default).
 constexpr double kPatchFixedBytes = 4000;
+// NAME.state.N.bin (src/bake/state.cpp), encoded in memory each frame and
+// held until written: per patch a header of about 100 bytes and its held
+// cells (2 KiB), per vertex 53 bytes, per triangle 20 (the arrays as they
+// are). The byte string grows by doubling: provision 2x. (About 21 KB a
+// patch alive on splash; the vectors above have no slack there.)
+constexpr double kStatePatchBytes = 100 + 2048, kStateVertexBytes = 53, kStateTriangleBytes = 20;
+constexpr double kStateSlack = 2;
 // A lattice patch has about 5.67 / e^2 vertices for a remesh edge e r (an
 // equilateral lattice of edge 0.8 e r over a disk of radius r), twice as many
 // triangles.
@@ -140,6 +147,8 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   vertices_per_patch = std::max(vertices_per_patch, 16.0);
   e.patch_bytes =
       e.patches * (kPatchFixedBytes + vertices_per_patch * (kPatchVertexBytes + 2 * kPatchTriangleBytes));
+  e.state = kStateSlack * e.patches *
+            (kStatePatchBytes + vertices_per_patch * (kStateVertexBytes + 2 * kStateTriangleBytes));
   e.seeding = r > 0 ? kSeedingBytesPerUnit * std::min(area / (d * d), 5e8 / 40) : 0;
 
   const double n2 = double(o.atlas.resolution) * double(o.atlas.resolution);
@@ -159,7 +168,7 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   e.exemplar = s.color.decoded_bytes() + s.feature.decoded_bytes() + s.displacement.decoded_bytes() +
                pixels * kExemplarPixelBytes;
   e.base = kBaseBytes;
-  e.total = e.atlas + e.tracking + e.patch_bytes + e.seeding + e.meshes + e.exemplar + e.base;
+  e.total = e.atlas + e.tracking + e.patch_bytes + e.state + e.seeding + e.meshes + e.exemplar + e.base;
   return e;
 }
 
@@ -191,10 +200,11 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
                                o.patch.radius, tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
                                tracking_resolution(s.area * s.growth, o.patch.radius, o.track_texel),
                                format_bytes(e.tracking))},
-      {e.patch_bytes + e.seeding,
-       fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {}",
+      {e.patch_bytes + e.state + e.seeding,
+       fmt::format("--{} would need {:.2g} patches of {:.3g} vertices (--spacing {:.3g}, --remesh-edge {:.3g}): {} "
+                   "with their state file",
                    radius, e.patches, e.vertices_per_patch, o.seeding.spacing, o.patch.remesh_edge,
-                   format_bytes(e.patch_bytes + e.seeding))},
+                   format_bytes(e.patch_bytes + e.state + e.seeding))},
       {e.meshes, fmt::format("{}: {} triangles per frame: {} for the frames in flight", s.first_mesh, s.triangles,
                              format_bytes(e.meshes))},
       {e.exemplar, fmt::format("--exemplar {}: {}x{} pixels: {}", o.exemplar_color, s.color.width, s.color.height,

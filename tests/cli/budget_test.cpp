@@ -258,7 +258,9 @@ TEST(Budget, TheBudgetIsTheEstimate) {
   BakeOptions probe = o;
   const BakeMemoryEstimate e = resolve_bake_options(probe);
   EXPECT_NEAR(e.covering_patches, 2.366 / (3.14159265 * 0.05 * 0.05), 2.0);
-  EXPECT_GT(e.total, e.atlas + e.patch_bytes);
+  EXPECT_GT(e.total, e.atlas + e.patch_bytes + e.state);
+  // The state file: at least the held cells (2 KiB) of every patch provisioned.
+  EXPECT_GE(e.state, e.patches * 2048);
   // Four times the texels: four times the atlas buffers.
   BakeOptions twice = o;
   twice.atlas.resolution = 512;

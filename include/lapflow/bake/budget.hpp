@@ -37,6 +37,7 @@ struct BakeMemoryEstimate {
   double atlas = 0;             ///< per-texel buffers of the frames in flight
   double tracking = 0;          ///< the tracking atlas's (BakeOptions::track_texel): index, texel maps, keys
   double patch_bytes = 0;       ///< the patch population
+  double state = 0;             ///< the patch state encoded for NAME.state.N.bin while it is written
   double seeding = 0;           ///< Poisson-disk candidates (first frame, and the per-frame fresh count)
   double meshes = 0;            ///< the frames in flight: meshes, closest-point BVH, velocity band, atlas tables
   double exemplar = 0;          ///< decoded exemplar, its mip pyramid and erosion maps
