@@ -108,13 +108,12 @@ void bench_atlas(const std::string& data_dir) {
 }
 
 void bench_obj(const std::string& data_dir) {
-  const std::string pattern = data_dir + "/splash/splash.%04d.ply";
+  const FramePattern pattern(data_dir + "/splash/splash.%04d.ply");
   const std::filesystem::path out = std::filesystem::temp_directory_path() / "lapflow_bench_obj.obj";
   fmt::print("# UV mesh OBJ + MTL (write_uv_mesh_obj), atlas 6144^2, best of 3; 'bytes only' writes a string of the "
              "OBJ's size atomically\n");
   for (int f : {1, 12, 24, 48}) {
-    char path[4096];
-    std::snprintf(path, sizeof path, pattern.c_str(), f);
+    const std::string path = pattern.path(f);
     if (!std::filesystem::exists(path)) {
       fmt::print("# {} absent\n", path);
       continue;

@@ -55,17 +55,18 @@ constexpr double kFramesInFlight = 3;
 // Per patch vertex: position 24, rest uv 16, surface triangle 4, quality 4,
 // border 1, weight 4; per patch triangle: indices 12, quality 4, delta 4.
 // Vectors grow by doubling: provision 1.5x.
-constexpr double kPatchVertexBytes = 1.5 * 53, kPatchTriangleBytes = 1.5 * 20;
+constexpr double kPatchVertexRawBytes = 53, kPatchTriangleRawBytes = 20;
+constexpr double kPatchVertexBytes = 1.5 * kPatchVertexRawBytes, kPatchTriangleBytes = 1.5 * kPatchTriangleRawBytes;
 // Per patch: its struct, the held-cell grid (2 KiB) and the raster's
 // per-patch tables. With the lattice's 204 vertices a patch comes to 32 KiB;
 // measured: 33 KiB per patch alive (dam_break, radius 0.01 against the default).
 constexpr double kPatchFixedBytes = 4000;
 // NAME.state.N.bin (src/bake/state.cpp), encoded in memory each frame and
 // held until written: per patch a header of about 100 bytes and its held
-// cells (2 KiB), per vertex 53 bytes, per triangle 20 (the arrays as they
-// are). The byte string grows by doubling: provision 2x. (About 21 KB a
-// patch alive on splash; the vectors above have no slack there.)
-constexpr double kStatePatchBytes = 100 + 2048, kStateVertexBytes = 53, kStateTriangleBytes = 20;
+// cells (2 KiB), and the vertex and triangle arrays as they are (the raw
+// bytes above, without the vectors' slack). The byte string grows by
+// doubling: provision 2x. (About 21 KB a patch alive on splash.)
+constexpr double kStatePatchBytes = 100 + 2048;
 constexpr double kStateSlack = 2;
 // A lattice patch has about 5.67 / e^2 vertices for a remesh edge e r (an
 // equilateral lattice of edge 0.8 e r over a disk of radius r), twice as many
@@ -148,7 +149,7 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   e.patch_bytes =
       e.patches * (kPatchFixedBytes + vertices_per_patch * (kPatchVertexBytes + 2 * kPatchTriangleBytes));
   e.state = kStateSlack * e.patches *
-            (kStatePatchBytes + vertices_per_patch * (kStateVertexBytes + 2 * kStateTriangleBytes));
+            (kStatePatchBytes + vertices_per_patch * (kPatchVertexRawBytes + 2 * kPatchTriangleRawBytes));
   e.seeding = r > 0 ? kSeedingBytesPerUnit * std::min(area / (d * d), 5e8 / 40) : 0;
 
   const double n2 = double(o.atlas.resolution) * double(o.atlas.resolution);
