@@ -172,12 +172,31 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
   return g;
 }
 
+// Tiles of 2^shift x 2^shift atlas pixels, marked where a draw may matter:
+// the merge test's second draw only looks at its candidates' texels, so a
+// patch triangle whose pixels all lie in unmarked tiles can be left out.
+struct TileMask {
+  int shift = 3, width = 0;
+  std::vector<uint8_t> marked;
+  TileMask(int N, int s) : shift(s), width(((N - 1) >> s) + 1), marked(std::size_t(width) * width, 0) {}
+  void mark(int x, int y) { marked[std::size_t(y >> shift) * width + std::size_t(x >> shift)] = 1; }
+  // Any marked tile under pixel box [x0, x1] x [y0, y1] (clamped to the atlas).
+  bool any(int x0, int y0, int x1, int y1) const {
+    const int tx0 = std::max(0, x0) >> shift, tx1 = std::min(width - 1, std::max(0, x1) >> shift);
+    const int ty0 = std::max(0, y0) >> shift, ty1 = std::min(width - 1, std::max(0, y1) >> shift);
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx)
+        if (marked[std::size_t(ty) * width + std::size_t(tx)]) return true;
+    return false;
+  }
+};
+
 // Seam fallback: the fluid triangles near the patch triangle (walk over shared
 // vertices from its vertices' triangles, bounded by its bounding sphere plus a
 // margin), each drawn through its own affine map into its own texels.
 template <class Sink>
 void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int ti, const int vtri[3], uint64_t key,
-                        std::vector<int32_t>& found, int exclude_chart = -1) {
+                        std::vector<int32_t>& found, int exclude_chart = -1, const TileMask* clip = nullptr) {
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
@@ -227,6 +246,7 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
     const int cx0 = std::max(0, int(std::floor(fx0))), cx1 = std::min(ctx.N - 1, int(std::ceil(fx1)));
     const int cy0 = std::max(0, int(std::floor(fy0))), cy1 = std::min(ctx.N - 1, int(std::ceil(fy1)));
     if (cx0 > cx1 || cy0 > cy1) continue;
+    if (clip && !clip->any(cx0, cy0, cx1, cy1)) continue;  // every write lands in F's box
     const Tri& FT = ctx.mesh.triangles[F];
     const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
     const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
@@ -491,9 +511,14 @@ struct SampleSink {
   }
 };
 
+// `clip` (optional): only texels in its marked tiles matter to the caller.
+// Triangles drawn in their chart whose pixels (and the ring around them) lie
+// in unmarked tiles are left out, but those that look for a seam (`ring`):
+// a seam could send them through the fallback into another chart's marked
+// texels. The fallback skips fluid triangles whose boxes are unmarked.
 template <class Sink>
 void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, std::size_t patch_index,
-                          RasterCounters& counters) {
+                          RasterCounters& counters, const TileMask* clip = nullptr) {
   const std::size_t nv = patch.positions.size();
   if (patch.rest_uv.size() != nv) return;
   // Per vertex: its fluid triangle and, through it, its atlas pixel position.
@@ -543,6 +568,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
       // seam could then cross it away from them).
       ct.ring = near || area2 > 4 * std::min({ctx.tri_area2_px[vtri[t[0]]], ctx.tri_area2_px[vtri[t[1]]],
                                               ctx.tri_area2_px[vtri[t[2]]]});
+      if (clip && !ct.ring && !clip->any(ct.x0 - 1, ct.y0 - 1, ct.x1 + 1, ct.y1 + 1)) continue;
       bool crosses = false;
       if (tiny && near) {
         const PatchTriGeometry g = patch_tri_geometry(patch, t);
@@ -554,12 +580,12 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
       } else if (crosses) {
         const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
         ++counters.seam_triangles;
-        draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0);
+        draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0, clip);
       }
     } else {
       ++counters.seam_triangles;
       const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
-      draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch);
+      draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, -1, clip);
     }
   }
   // Group by chart (stable: triangle order kept inside a chart).
@@ -584,7 +610,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
     const Tri& t = patch.triangles[in_chart[k].index];
     const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
     draw_seam_triangle(ctx, sink, patch, in_chart[k].index, vt,
-                       make_key(patch_index, std::size_t(in_chart[k].index)), scratch, in_chart[k].chart);
+                       make_key(patch_index, std::size_t(in_chart[k].index)), scratch, in_chart[k].chart, clip);
   }
 }
 
@@ -931,8 +957,9 @@ namespace {
 // and `limit` texels, every one of which another patch's erosion test also
 // passes. Those others are drawn again into a second key buffer that only
 // the candidates' texels accept (the rest start at key 0, "taken"); only
-// patches near a candidate texel in 3D are drawn. Deterministic: atomic
-// minimum as in draw_patches.
+// patches near a candidate texel in 3D are drawn, and of those only the
+// triangles that can reach a tile holding a candidate texel (TileMask).
+// Deterministic: atomic minimum as in draw_patches.
 std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& patches,
                                            const std::vector<uint64_t>& won, double limit) {
   const std::size_t np = patches.patches.size();
@@ -943,6 +970,7 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
   if (!any) return merged;
   const TexelMap& tm = ctx.atlas.texels;
   std::vector<uint64_t> alt(tm.size(), 0);
+  TileMask clip(ctx.N, 3);
   const double cell = ctx.radius;
   auto cell_of = [&](const Vec3& x) {
     return std::array<int64_t, 3>{int64_t(std::floor(x.x / cell)), int64_t(std::floor(x.y / cell)),
@@ -953,6 +981,7 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
     const uint64_t key = ctx.keys[i];
     if (key == kNoKey || !candidate[key >> 32]) continue;
     alt[i] = kNoKey;
+    clip.mark(int(tm.texel[i] % uint32_t(ctx.N)), int(tm.texel[i] / uint32_t(ctx.N)));
     const Tri& T = ctx.mesh.triangles[tm.triangle[i]];
     const double b1 = tm.b1[i], b2 = tm.b2[i];
     const auto c = cell_of(ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 +
@@ -980,7 +1009,7 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
     for (std::size_t q = b; q < e; ++q)
       // Not a candidate, and not retiring for winning nothing.
       if (!candidate[q] && won[q] > 0 && near(patches.patches[q]))
-        rasterize_patch_into(ctx, sink, patches.patches[q], q, unused);
+        rasterize_patch_into(ctx, sink, patches.patches[q], q, unused, &clip);
   }, 4);
   std::vector<uint64_t> open(np, 0);
   for (std::size_t i = 0; i < tm.size(); ++i)
