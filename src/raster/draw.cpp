@@ -10,6 +10,7 @@
 #include <atomic>
 #include <climits>
 #include <cstdint>
+#include <memory>
 #include <cmath>
 #include <stdexcept>
 
@@ -135,7 +136,7 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
       if (!passes(ctx, patch, u, v, wt, slope)) continue;
-      sink.put(idx, key, u, v, wt);
+      sink.put(idx, x, y, key, u, v, wt);
     }
   }
 }
@@ -356,6 +357,77 @@ static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double rad
   return false;
 }
 
+// Tiles of 8 x 8 atlas pixels that older patches already keep, so that a
+// younger patch's triangle lying wholly in them is not drawn at all (its every
+// texel would stop at the key test). Only "pure" tiles count: every pixel a
+// texel of one chart, so that a triangle of that chart inside them cannot
+// leak across a seam either; the skip then changes nothing but the time, at
+// any thread count or timing. Per tile: the texels still at kNoKey, and an
+// upper bound of the keys written (every first write raises it before it
+// counts the texel as kept).
+struct OwnedTiles {
+  static constexpr int kShift = 3;
+  int width = 0;
+  std::vector<int32_t> chart;  // every pixel's chart, or -1 (mixed, outside the charts or the atlas)
+  std::unique_ptr<std::atomic<uint32_t>[]> open;
+  std::unique_ptr<std::atomic<uint64_t>[]> max_key;
+
+  explicit OwnedTiles(const RasterContext& ctx) : width(ctx.N >> kShift) {
+    const std::size_t n = std::size_t(width) * width;
+    chart.assign(n, -1);
+    open = std::make_unique<std::atomic<uint32_t>[]>(n);
+    max_key = std::make_unique<std::atomic<uint64_t>[]>(n);
+    const auto& tri_of = ctx.atlas.texels.triangle;
+    const auto& chart_of = ctx.atlas.chart_of_triangle;
+    const std::size_t N = std::size_t(ctx.N);
+    parallel_for(std::size_t(width), [&](std::size_t b, std::size_t e) {
+      for (std::size_t ty = b; ty < e; ++ty)
+        for (std::size_t tx = 0; tx < std::size_t(width); ++tx) {
+          const std::size_t t = ty * width + tx;
+          open[t].store(1u << (2 * kShift), std::memory_order_relaxed);
+          max_key[t].store(0, std::memory_order_relaxed);
+          int32_t c = -2;
+          for (std::size_t y = ty << kShift; y < (ty + 1) << kShift && c != -1; ++y)
+            for (std::size_t x = tx << kShift; x < (tx + 1) << kShift; ++x) {
+              const int32_t idx = ctx.index[y * N + x];
+              const int32_t ci = idx < 0 ? -1 : chart_of[tri_of[idx]];
+              if (c == -2) c = ci;
+              if (ci != c) c = -1;
+              if (c == -1) break;
+            }
+          chart[t] = c < 0 ? -1 : c;
+        }
+    }, 8);
+  }
+  // A texel of pixel (x, y) got its first key.
+  void first_write(int x, int y, uint64_t key) {
+    const int tx = x >> kShift, ty = y >> kShift;
+    if (tx >= width || ty >= width) return;
+    const std::size_t t = std::size_t(ty) * width + tx;
+    if (chart[t] < 0) return;
+    uint64_t cur = max_key[t].load(std::memory_order_relaxed);
+    while (cur < key && !max_key[t].compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
+    }
+    open[t].fetch_sub(1, std::memory_order_release);
+  }
+  // Every pixel of box [x0, x1] x [y0, y1] (clamped to the atlas) is a texel of
+  // `c` whose key is below `key`.
+  bool kept_below(int x0, int y0, int x1, int y1, int c, uint64_t key) const {
+    const int last = (width << kShift) - 1;
+    if (x1 > last || y1 > last) return false;
+    const int tx0 = std::max(0, x0) >> kShift, tx1 = x1 >> kShift;
+    const int ty0 = std::max(0, y0) >> kShift, ty1 = y1 >> kShift;
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx) {
+        const std::size_t t = std::size_t(ty) * width + tx;
+        if (chart[t] != c || open[t].load(std::memory_order_acquire) != 0 ||
+            max_key[t].load(std::memory_order_relaxed) >= key)
+          return false;
+      }
+    return true;
+  }
+};
+
 namespace {
 
 // One patch triangle drawn in its chart: pixel-space barycentrics, rest uv, w.
@@ -410,8 +482,14 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
   const auto& tri_of = ctx.atlas.texels.triangle;
   const auto& chart_of = ctx.atlas.chart_of_triangle;
   const int Nm1 = ctx.N - 1;
+  const OwnedTiles* owned = sink.owned_tiles();
+  const uint64_t first_key = make_key(patch_index, 0);
   for (std::size_t k = 0; k < count; ++k) {
     const ChartTriangle& t = tris[k];
+    // Wholly in tiles older patches keep (the ring pixels included): no
+    // texel to win and no seam to find. A triangle already known to cross
+    // one (leaky) goes through the fallback as before.
+    if (owned && !leaky[k] && owned->kept_below(t.x0 - 1, t.y0 - 1, t.x1 + 1, t.y1 + 1, chart, first_key)) continue;
     // Barycentric slack of one pixel per edge: pixel centres within 1 px
     // outside the triangle only serve the leak test (a seam cutting a sliver
     // off the triangle between pixel centres still shows up there).
@@ -481,32 +559,37 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
       if (!passes(ctx, patch, u, v, wt, t.slope)) continue;
-      sink.put(idx, key, u, v, wt);
+      sink.put(idx, x, y, key, u, v, wt);
     }
   }
 }
 
 // Erosion and Advect: each texel keeps the smallest key by atomic min.
+// With `owned` (draw_patches), first writes keep OwnedTiles up to date.
 struct KeySink {
   std::vector<uint64_t>& keys;
+  OwnedTiles* owned = nullptr;
+  const OwnedTiles* owned_tiles() const { return owned; }
   void prefetch(int32_t idx) const { __builtin_prefetch(&keys[idx]); }
   bool taken(int32_t idx, uint64_t key) const {
     return std::atomic_ref<uint64_t>(keys[idx]).load(std::memory_order_relaxed) <= key;
   }
-  void put(int32_t idx, uint64_t key, double, double, double) {
+  void put(int32_t idx, int x, int y, uint64_t key, double, double, double) {
     std::atomic_ref<uint64_t> slot(keys[idx]);
     uint64_t cur = slot.load(std::memory_order_relaxed);
     while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
     }
+    if (owned && cur == kNoKey) owned->first_write(x, y, key);
   }
 };
 
 // Blend: every texel the patch covers is collected (raster_blend.cpp sums them).
 struct SampleSink {
   std::vector<BlendSample>& out;
+  const OwnedTiles* owned_tiles() const { return nullptr; }
   void prefetch(int32_t) const {}
   bool taken(int32_t, uint64_t) const { return false; }
-  void put(int32_t idx, uint64_t key, double u, double v, double w) {
+  void put(int32_t idx, int, int, uint64_t key, double u, double v, double w) {
     out.push_back({idx, uint32_t(key & 0xffffffffu), u, v, w});
   }
 };
@@ -616,9 +699,10 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
 
 }  // namespace
 
-void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters) {
+void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters,
+                     OwnedTiles* owned) {
   if (ctx.mode != RasterMode::Blend) {
-    KeySink sink{ctx.keys};
+    KeySink sink{ctx.keys, owned};
     rasterize_patch_into(ctx, sink, patch, patch_index, counters);
     return;
   }
@@ -723,12 +807,15 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   // the youngest patches first.) The result does not depend on the order.
   constexpr std::size_t kBatch = 8;
   std::atomic<std::size_t> next_batch{0};
+  // Blend sums every patch: nothing to skip.
+  const std::unique_ptr<OwnedTiles> owned = ctx.mode == RasterMode::Blend ? nullptr : std::make_unique<OwnedTiles>(ctx);
   const std::size_t workers = std::size_t(std::max(1, thread_count()));
   parallel_for(workers, [&](std::size_t, std::size_t) {
     for (;;) {
       const std::size_t b = next_batch.fetch_add(1, std::memory_order_relaxed) * kBatch;
       if (b >= np) break;
-      for (std::size_t p = b; p < std::min(np, b + kBatch); ++p) rasterize_patch(ctx, patches.patches[p], p, counters[p]);
+      for (std::size_t p = b; p < std::min(np, b + kBatch); ++p)
+        rasterize_patch(ctx, patches.patches[p], p, counters[p], owned.get());
     }
   }, 1);
   for (const auto& c : counters) {
@@ -810,8 +897,13 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
       const double dx = cu - u, dy = cv - v;
       return std::abs(dx * uy.y - uy.x * dy) <= 0.5 * std::abs(det) && std::abs(ux.x * dy - dx * ux.y) <= 0.5 * std::abs(det);
     };
-    for (int cv = v0; cv <= v1; ++cv)
-      for (int cu = u0; cu <= u1; ++cu)
+    // Only cells within the footprint's bounding box can lie in it (a
+    // billionth of a cell of slack against round-off): most of [u0, u1] x
+    // [v0, v1] is not, and each of those cells cost four tests.
+    const int iu0 = std::max(u0, int(std::ceil((u - hx) * R - 1e-9))), iu1 = std::min(u1, int(std::floor((u + hx) * R + 1e-9)) - 1);
+    const int iv0 = std::max(v0, int(std::ceil((v - hy) * R - 1e-9))), iv1 = std::min(v1, int(std::floor((v + hy) * R + 1e-9)) - 1);
+    for (int cv = iv0; cv <= iv1; ++cv)
+      for (int cu = iu0; cu <= iu1; ++cu)
         if (inside(double(cu) / R, double(cv) / R) && inside(double(cu + 1) / R, double(cv) / R) &&
             inside(double(cu) / R, double(cv + 1) / R) && inside(double(cu + 1) / R, double(cv + 1) / R))
           set(cu, cv);

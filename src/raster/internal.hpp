@@ -115,9 +115,15 @@ struct RasterCounters {
 /// Builds index, keys and the fluid-triangle tables.
 void setup_context(RasterContext& ctx);
 
+/// Tiles that older patches keep (draw.cpp), used by draw_patches to skip
+/// drawing that cannot win a texel.
+struct OwnedTiles;
+
 /// Rasterizes every triangle of `patch` (PatchSet index `patch_index`) into
 /// ctx.keys by atomic min. Safe to call concurrently for different patches.
-void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters);
+/// `owned`: see OwnedTiles (draw_patches only; it must see every write).
+void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters,
+                     OwnedTiles* owned = nullptr);
 
 /// Blend mode: the samples of one patch (any order, duplicates allowed; the
 /// lowest patch triangle of each texel counts) added to ctx.blend (phase 1)
