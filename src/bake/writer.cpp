@@ -55,6 +55,8 @@ nlohmann::json stats_json(const FrameStats& s) {
 struct FrameWriter::Job {
   int frame = 0;
   FrameTextures textures;
+  /// Colour and displacement in half, when the EXRs are (textures' floats then freed).
+  HalfImage color_half, displacement_half;
   SurfaceAtlas atlas;
   std::shared_ptr<const Frame> surface;  ///< for the mesh
   PatchSet patches;                      ///< a copy, with dump_patches only
@@ -102,8 +104,14 @@ double FrameWriter::write_files(const Job& w) const {
     return clock.lap();
   }
   std::vector<std::function<void()>> jobs;
-  jobs.push_back([&] { write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr, &staged); });
-  jobs.push_back([&] { write_exr(disp, w.textures.displacement, {"Y"}, o.exr, &staged); });
+  jobs.push_back([&] {
+    if (!w.color_half.bits.empty()) write_exr(color, w.color_half, {"R", "G", "B", "A"}, o.exr, &staged);
+    else write_exr(color, w.textures.color, {"R", "G", "B", "A"}, o.exr, &staged);
+  });
+  jobs.push_back([&] {
+    if (!w.displacement_half.bits.empty()) write_exr(disp, w.displacement_half, {"Y"}, o.exr, &staged);
+    else write_exr(disp, w.textures.displacement, {"Y"}, o.exr, &staged);
+  });
   if (o.aov)
     jobs.push_back([&] {
       // Data: float, and never lossy.
@@ -166,6 +174,15 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
   auto job = std::make_shared<Job>();
   job->frame = frame->number;
   job->textures = std::move(frame->textures);
+  if (options_.exr.type == ExrPixelType::Half && !job->textures.color.empty()) {
+    // The same conversion write_exr does, done now: the files are written
+    // (or wait for the writer) from half the bytes, and the floats go back to
+    // the heap for the next frame's images before the writes begin.
+    job->color_half = to_half_image(job->textures.color);
+    job->displacement_half = to_half_image(job->textures.displacement);
+    job->textures.color = Image();
+    job->textures.displacement = Image();
+  }
   job->atlas = std::move(frame->atlas);
   job->surface = frame;
   if (options_.dump_patches) job->patches = patches;

@@ -383,19 +383,20 @@ void sample_bilinear(const Image& img, double u, double v, float* out) {
   }
 }
 
-void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
-               const ExrOptions& options, StagedFiles* staged) {
-  check_channels(path, img);
-  if (int(channel_names.size()) != img.channels)
+namespace {
+
+OIIO::ImageSpec exr_spec(const std::string& path, int width, int height, int channels,
+                         const std::vector<std::string>& channel_names, ExrPixelType type,
+                         ExrCompression compression_type) {
+  if (int(channel_names.size()) != channels)
     throw std::invalid_argument(path + ": write_exr needs one channel name per channel");
-  OIIO::ImageSpec spec(img.width, img.height, img.channels,
-                       options.type == ExrPixelType::Half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+  OIIO::ImageSpec spec(width, height, channels, type == ExrPixelType::Half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
   spec.channelnames = channel_names;
   spec.alpha_channel = -1;
-  for (int c = 0; c < img.channels; ++c)
+  for (int c = 0; c < channels; ++c)
     if (channel_names[c] == "A") spec.alpha_channel = c;
   const char* compression = "rle";
-  switch (options.compression) {
+  switch (compression_type) {
     case ExrCompression::Piz: compression = "piz"; break;
     case ExrCompression::Zip: compression = "zip"; break;
     case ExrCompression::Dwaa: compression = "dwaa"; break;
@@ -416,13 +417,39 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
   spec.attribute("DateTime", 0);
   // OpenEXR keeps its own thread pool, separate from OIIO's "threads".
   OIIO::attribute("exr_threads", thread_count());
+  return spec;
+}
+
+}  // namespace
+
+HalfImage to_half_image(const Image& img) {
+  HalfImage h;
+  h.width = img.width, h.height = img.height, h.channels = img.channels;
+  h.bits = to_half(img.pixels);
+  return h;
+}
+
+void write_exr(const std::string& path, const HalfImage& img, const std::vector<std::string>& channel_names,
+               const ExrOptions& options, StagedFiles* staged) {
+  if (img.width <= 0 || img.height <= 0 || img.channels <= 0 ||
+      img.bits.size() != std::size_t(img.width) * img.height * img.channels)
+    throw OutputError(path + ": cannot write an empty or inconsistent image");
+  const OIIO::ImageSpec spec =
+      exr_spec(path, img.width, img.height, img.channels, channel_names, ExrPixelType::Half, options.compression);
+  write_atomically(path, [&](const std::string& tmp) {
+    write_oiio(path, tmp, spec, OIIO::TypeDesc::HALF, img.bits.data());
+  }, staged);
+}
+
+void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
+               const ExrOptions& options, StagedFiles* staged) {
+  check_channels(path, img);
   if (options.type == ExrPixelType::Half) {
-    const std::vector<uint16_t> half = to_half(img.pixels);
-    write_atomically(path, [&](const std::string& tmp) {
-      write_oiio(path, tmp, spec, OIIO::TypeDesc::HALF, half.data());
-    }, staged);
+    write_exr(path, to_half_image(img), channel_names, options, staged);
     return;
   }
+  const OIIO::ImageSpec spec =
+      exr_spec(path, img.width, img.height, img.channels, channel_names, options.type, options.compression);
   write_atomically(path, [&](const std::string& tmp) {
     write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
   }, staged);

@@ -1,6 +1,7 @@
 #pragma once
 /// \file image.hpp Float images, exemplars and EXR/PNG writing (OIIO behind it).
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -67,6 +68,18 @@ struct ExrOptions {
 /// The header holds no date, time or host: the same image gives the same
 /// bytes. Throws OutputError.
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
+               const ExrOptions& options = {}, StagedFiles* staged = nullptr);
+/// An image converted to EXR half (IEEE binary16 bits, round to nearest
+/// even), the same pixels write_exr writes for ExrPixelType::Half: a bake
+/// converts its colour and displacement as soon as they are done, so the
+/// frame waiting for the writer holds half the bytes.
+struct HalfImage {
+  int width = 0, height = 0, channels = 0;
+  std::vector<uint16_t> bits;  ///< width*height*channels
+};
+HalfImage to_half_image(const Image& img);
+/// write_exr of an image already in half (options.type is ignored).
+void write_exr(const std::string& path, const HalfImage& img, const std::vector<std::string>& channel_names,
                const ExrOptions& options = {}, StagedFiles* staged = nullptr);
 /// Writes a PNG (values clamped to [0,1], encoded to sRGB when `to_srgb`;
 /// alpha, the last of 2 or 4 channels, is never encoded), atomically.
