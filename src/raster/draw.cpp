@@ -29,15 +29,12 @@ namespace {
 // just off the triangle extrapolate smoothly). Texel centres are integers:
 // X = u N - 0.5, Y = (1 - v) N - 0.5 (atlas.hpp's convention).
 bool to_pixels(const RasterContext& ctx, int tri, const Vec3& p, Vec2& out) {
-  const Tri& T = ctx.mesh.triangles[tri];
-  const Vec3& A = ctx.mesh.positions[T[0]];
-  const Vec3 e0 = ctx.mesh.positions[T[1]] - A, e1 = ctx.mesh.positions[T[2]] - A, e2 = p - A;
-  const double d00 = dot(e0, e0), d01 = dot(e0, e1), d11 = dot(e1, e1), d20 = dot(e2, e0), d21 = dot(e2, e1);
-  const double den = d00 * d11 - d01 * d01;
-  if (!(den > 1e-14 * d00 * d11)) return false;
-  const double b1 = (d11 * d20 - d01 * d21) / den, b2 = (d00 * d21 - d01 * d20) / den;
-  const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(tri) * 3];
-  const Vec2 uv = cu[0] + (cu[1] - cu[0]) * b1 + (cu[2] - cu[0]) * b2;
+  const TrianglePixelMap& m = ctx.pixel_map[std::size_t(tri)];
+  if (!m.ok) return false;
+  const Vec3 e2 = p - m.a;
+  const double d20 = dot(e2, m.e0), d21 = dot(e2, m.e1);
+  const double b1 = (m.d11 * d20 - m.d01 * d21) / m.den, b2 = (m.d00 * d21 - m.d01 * d20) / m.den;
+  const Vec2 uv = m.uv0 + m.du1 * b1 + m.du2 * b2;
   out = {uv.x * ctx.N - 0.5, (1.0 - uv.y) * ctx.N - 0.5};
   return std::isfinite(out.x) && std::isfinite(out.y);
 }
@@ -291,6 +288,7 @@ void setup_context(RasterContext& ctx) {
   }, 1 << 14);
   ctx.keys.assign(tm.size(), kNoKey);
 
+  ctx.pixel_map.resize(nt);
   ctx.tri_normal.resize(nt);
   ctx.tri_centroid.resize(nt);
   ctx.tri_radius.resize(nt);
@@ -305,6 +303,13 @@ void setup_context(RasterContext& ctx) {
       ctx.tri_radius[t] = std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}));
       const Vec2* cu = &atlas.corner_uv[t * 3];
       ctx.tri_area2_px[t] = std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(ctx.N) * ctx.N;
+      TrianglePixelMap& pm = ctx.pixel_map[t];
+      pm.a = a;
+      pm.e0 = bb - a, pm.e1 = c - a;
+      pm.d00 = dot(pm.e0, pm.e0), pm.d01 = dot(pm.e0, pm.e1), pm.d11 = dot(pm.e1, pm.e1);
+      pm.den = pm.d00 * pm.d11 - pm.d01 * pm.d01;
+      pm.ok = pm.den > 1e-14 * pm.d00 * pm.d11;
+      pm.uv0 = cu[0], pm.du1 = cu[1] - cu[0], pm.du2 = cu[2] - cu[0];
     }
   }, 4096);
   // Vertex -> triangles in triangle order (deterministic walk order).

@@ -53,6 +53,17 @@ struct BlendState {
   bool covered(std::size_t i) const { return sums[i * 5] > kBlendMinFixed; }
 };
 
+/// A fluid triangle's map from 3D points to atlas uv: p is projected on the
+/// triangle's plane (barycentrics b1, b2 from the dot products with its edges,
+/// unclamped) and carried by the corner uv (draw.cpp, to_pixels). Computed
+/// once per frame instead of once per patch vertex.
+struct TrianglePixelMap {
+  Vec3 a, e0, e1;                // corner 0 and the edges to corners 1 and 2
+  double d00 = 0, d01 = 0, d11 = 0, den = 0;
+  Vec2 uv0, du1, du2;            // corner 0's uv and the edges' uv
+  bool ok = false;               // not degenerate
+};
+
 struct RasterContext {
   const TriMesh& mesh;
   const SurfaceAtlas& atlas;
@@ -87,6 +98,8 @@ struct RasterContext {
   std::size_t newborn_from = std::numeric_limits<std::size_t>::max();
   ErosionMap held_erosion;
   double held_reach = 0;
+  /// Per fluid triangle: the map of to_pixels.
+  std::vector<TrianglePixelMap> pixel_map;
   /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).
   std::vector<Vec3> tri_normal, tri_centroid;
   std::vector<double> tri_radius;
