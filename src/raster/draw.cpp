@@ -463,6 +463,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
     bx1 = std::max(bx1, tris[k].x1), by1 = std::max(by1, tris[k].y1);
   }
   if (bx0 > bx1 || by0 > by1) return;
+  {
   const std::size_t W = std::size_t(bx1 - bx0 + 1), H = std::size_t(by1 - by0 + 1);
   // A patch whose pieces lie far apart in one chart would make the joint box
   // huge: draw its triangles one by one instead.
@@ -482,19 +483,41 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
     }
     return;
   }
-  local.assign(W * H, -1);
+  }
   const int chart = tris[0].chart;
   const auto& tri_of = ctx.atlas.texels.triangle;
   const auto& chart_of = ctx.atlas.chart_of_triangle;
   const int Nm1 = ctx.N - 1;
+  // Triangles wholly in tiles older patches keep (the ring pixels included):
+  // no texel to win and no seam to find. A triangle already known to cross
+  // one (leaky) goes through the fallback as before. The buffer then spans
+  // the others' box only.
   const OwnedTiles* owned = sink.owned_tiles();
   const uint64_t first_key = make_key(patch_index, 0);
+  thread_local std::vector<uint8_t> skip;
+  skip.assign(count, 0);
+  if (owned) {
+    bx0 = by0 = INT32_MAX, bx1 = by1 = INT32_MIN;
+    for (std::size_t k = 0; k < count; ++k) {
+      const ChartTriangle& t = tris[k];
+      if (!leaky[k] && owned->kept_below(t.x0 - 1, t.y0 - 1, t.x1 + 1, t.y1 + 1, chart, first_key)) {
+        skip[k] = 1;
+        continue;
+      }
+      bx0 = std::min(bx0, t.x0), by0 = std::min(by0, t.y0);
+      bx1 = std::max(bx1, t.x1), by1 = std::max(by1, t.y1);
+    }
+    if (bx0 > bx1 || by0 > by1) return;
+  }
+  const std::size_t W = std::size_t(bx1 - bx0 + 1), H = std::size_t(by1 - by0 + 1);
+  local.assign(W * H, -1);
+  // Per row of the box, the columns some triangle covers (the sweep's span).
+  thread_local std::vector<int> span_lo, span_hi;
+  span_lo.assign(H, INT32_MAX);
+  span_hi.assign(H, INT32_MIN);
   for (std::size_t k = 0; k < count; ++k) {
+    if (skip[k]) continue;
     const ChartTriangle& t = tris[k];
-    // Wholly in tiles older patches keep (the ring pixels included): no
-    // texel to win and no seam to find. A triangle already known to cross
-    // one (leaky) goes through the fallback as before.
-    if (owned && !leaky[k] && owned->kept_below(t.x0 - 1, t.y0 - 1, t.x1 + 1, t.y1 + 1, chart, first_key)) continue;
     // Barycentric slack of one pixel per edge: pixel centres within 1 px
     // outside the triangle only serve the leak test (a seam cutting a sliver
     // off the triangle between pixel centres still shows up there).
@@ -509,16 +532,22 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
     const int rx0 = std::max(0, t.x0 - pad), rx1 = std::min(Nm1, t.x1 + pad);
     for (int y = ry0; y <= ry1; ++y) {
       const bool in_rows = y >= t.y0 && y <= t.y1;
-      int32_t* row = &local[std::size_t(y - by0) * W - bx0];
+      int32_t* row = in_rows ? &local[std::size_t(y - by0) * W] - bx0 : nullptr;
+      int lo = INT32_MAX, hi = INT32_MIN;
       for (int x = rx0; x <= rx1; ++x) {
         double l0, l1, l2;
         t.bary.at(x, y, l0, l1, l2);
         if (in_rows && x >= t.x0 && x <= t.x1 && l0 >= -kInsideTol && l1 >= -kInsideTol && l2 >= -kInsideTol) {
           if (row[x] < 0) row[x] = int32_t(k);
+          lo = std::min(lo, x), hi = std::max(hi, x);
         } else if (!leak && l0 >= ring[0] && l1 >= ring[1] && l2 >= ring[2]) {
           const int32_t idx = ctx.index[std::size_t(y) * ctx.N + x];
           leak = idx < 0 || chart_of[tri_of[idx]] != chart;
         }
+      }
+      if (lo <= hi) {
+        span_lo[std::size_t(y - by0)] = std::min(span_lo[std::size_t(y - by0)], lo);
+        span_hi[std::size_t(y - by0)] = std::max(span_hi[std::size_t(y - by0)], hi);
       }
     }
     leaky[k] = leak && t.ring ? 1 : leaky[k];
@@ -545,9 +574,10 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
   };
   for (int y = by0; y <= by1; ++y) {
     prefetch_rows(y);
-    const int32_t* lrow = &local[std::size_t(y - by0) * W - bx0];
+    const int32_t* lrow = &local[std::size_t(y - by0) * W] - bx0;
     const int32_t* irow = &ctx.index[std::size_t(y) * N];
-    for (int x = bx0; x <= bx1; ++x) {
+    const int x_end = span_hi[std::size_t(y - by0)];
+    for (int x = span_lo[std::size_t(y - by0)]; x <= x_end; ++x) {
       const int32_t k = lrow[x];
       if (k < 0) continue;
       const int32_t idx = irow[x];
