@@ -134,7 +134,7 @@ double current_rss_mb() {
 /// Issue 15's benchmark on real data: the shared splash (64k-80k triangles,
 /// droplets, many charts) with the foam exemplar at r = 0.028 (about 5k
 /// patches on frame 1). "Per frame" is the wall time between two frames'
-/// files landing on disk: every stage, reading ahead and writing behind
+/// files landing on disk: every stage, the reading ahead and the writing
 /// included, as a user waits for it.
 int bake_splash(const std::string& data, int resolution) {
   const std::string pattern = data + "/splash/splash.%04d.ply";
@@ -153,7 +153,7 @@ int bake_splash(const std::string& data, int resolution) {
   resolve_bake_options(o);
   fmt::print("splash 1-48, foam, r = 0.028, {}^2, {} threads\n\n", resolution, thread_count());
   fmt::print("| frame | triangles | charts | patches | advect s | weights s | atlas s (ahead) | track s | draw s | holes s | "
-             "resolve s | dilate s | write s (behind) | wall s | RSS MiB |\n");
+             "resolve s | dilate s | write s | wall s | RSS MiB |\n");
   fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   Stopwatch clock;
