@@ -369,7 +369,8 @@ static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double rad
 // leak across a seam either; the skip then changes nothing but the time, at
 // any thread count or timing. Per tile: the texels still at kNoKey, and an
 // upper bound of the keys written (every first write raises it before it
-// counts the texel as kept).
+// counts the texel as kept). Built on fresh keys, all kNoKey: draw_patches
+// is the first step after begin_raster.
 struct OwnedTiles {
   static constexpr int kShift = 3;
   int width = 0;
