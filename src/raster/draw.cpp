@@ -457,7 +457,7 @@ struct ChartTriangle {
 // vertices are in one chart but part of it lies across a seam or boundary.
 template <class Sink>
 void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::size_t patch_index, const ChartTriangle* tris,
-                      std::size_t count, std::vector<int32_t>& local, uint8_t* leaky) {
+                      std::size_t count, std::vector<int32_t>& local, uint8_t* leaky, RasterCounters& counters) {
   int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
   for (std::size_t k = 0; k < count; ++k) {
     bx0 = std::min(bx0, tris[k].x0), by0 = std::min(by0, tris[k].y0);
@@ -503,6 +503,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const ChartTriangle& t = tris[k];
       if (!leaky[k] && owned->kept_below(t.x0 - 1, t.y0 - 1, t.x1 + 1, t.y1 + 1, chart, first_key)) {
         skip[k] = 1;
+        ++counters.skipped_triangles;
         continue;
       }
       bx0 = std::min(bx0, t.x0), by0 = std::min(by0, t.y0);
@@ -719,7 +720,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
   for (std::size_t b = 0; b < in_chart.size();) {
     std::size_t e = b;
     while (e < in_chart.size() && in_chart[e].chart == in_chart[b].chart) ++e;
-    draw_chart_group(ctx, sink, patch, patch_index, &in_chart[b], e - b, scratch, &leaky[b]);
+    draw_chart_group(ctx, sink, patch, patch_index, &in_chart[b], e - b, scratch, &leaky[b], counters);
     b = e;
   }
   // The parts of leaky triangles beyond their chart, through the fallback.
@@ -856,6 +857,7 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   }, 1);
   for (const auto& c : counters) {
     st.seam_triangles += c.seam_triangles;
+    st.skipped_triangles += c.skipped_triangles;
     st.distorted_triangles += c.distorted_triangles;
   }
 }

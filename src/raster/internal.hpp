@@ -122,7 +122,7 @@ struct RasterContext {
 
 /// Counters of one raster call (summed per chunk, integers only).
 struct RasterCounters {
-  std::size_t seam_triangles = 0, distorted_triangles = 0;
+  std::size_t seam_triangles = 0, distorted_triangles = 0, skipped_triangles = 0;
 };
 
 /// Builds index, keys and the fluid-triangle tables.

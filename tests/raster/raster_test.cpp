@@ -239,6 +239,7 @@ TEST(Raster, OldestNonErodedPatchWinsOnePatchPerTexel) {
   const FrameTextures out = sc.run(o);
   EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
   EXPECT_EQ(out.stats.forced_texels, 0u);
+  EXPECT_GT(out.stats.skipped_triangles, 0u);  // the draw's skip was on
   expect_matches_reference(sc, out);
   // No blending: each texel's colour is the exemplar at its own patch (u, v),
   // and that (u, v) is the analytic map of the winning patch.
@@ -266,6 +267,9 @@ TEST(Raster, SeamFallbackAgreesWithThePaperAcrossCharts) {
   o.mipmap = false;
   const FrameTextures out = sc.run(o);
   EXPECT_GT(out.stats.seam_triangles, 0u);
+  // Triangles under older patches were left out (OwnedTiles), and every
+  // texel still has the paper's winner.
+  EXPECT_GT(out.stats.skipped_triangles, 0u);
   EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
   expect_matches_reference(sc, out);
 }

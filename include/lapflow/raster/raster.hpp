@@ -132,6 +132,9 @@ struct RasterStats {
   std::size_t retired_hidden = 0;  ///< of those: the rest, hidden under older patches
   std::size_t retired_merged = 0;  ///< of those: small, their texels covered by others (RasterOptions::merge)
   std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
+  /// Patch triangles the draw left out, wholly under texels older patches
+  /// keep (raster/draw.cpp, OwnedTiles): they could win nothing.
+  std::size_t skipped_triangles = 0;
   std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
   double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
   double texel_world_size = 0;     ///< metres per atlas texel (area-weighted mean)
