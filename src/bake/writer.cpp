@@ -178,9 +178,10 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
     // The same conversion write_exr does, done now: the files are written
     // (or wait for the writer) from half the bytes, and the floats go back to
     // the heap for the next frame's images before the writes begin.
+    // One image at a time: each float is freed before the next is converted.
     job->color_half = to_half_image(job->textures.color);
-    job->displacement_half = to_half_image(job->textures.displacement);
     job->textures.color = Image();
+    job->displacement_half = to_half_image(job->textures.displacement);
     job->textures.displacement = Image();
   }
   job->atlas = std::move(frame->atlas);
