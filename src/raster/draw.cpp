@@ -170,22 +170,49 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
   return g;
 }
 
-// Tiles of 2^shift x 2^shift atlas pixels, marked where a draw may matter:
-// the merge test's second draw only looks at its candidates' texels, so a
-// patch triangle whose pixels all lie in unmarked tiles can be left out.
-struct TileMask {
-  int shift = 3, width = 0;
-  std::vector<uint8_t> marked;
-  TileMask(int N, int s) : shift(s), width(((N - 1) >> s) + 1), marked(std::size_t(width) * width, 0) {}
-  void mark(int x, int y) { marked[std::size_t(y >> shift) * width + std::size_t(x >> shift)] = 1; }
-  // Any marked tile under pixel box [x0, x1] x [y0, y1] (clamped to the atlas).
-  bool any(int x0, int y0, int x1, int y1) const {
-    const int tx0 = std::max(0, x0) >> shift, tx1 = std::min(width - 1, std::max(0, x1) >> shift);
-    const int ty0 = std::max(0, y0) >> shift, ty1 = std::min(width - 1, std::max(0, y1) >> shift);
+}  // namespace
+
+// Square tiles of 8 x 8 atlas pixels, `width` a side, tile (tx, ty) at
+// ty * width + tx. Two widths: covering(N) gives every pixel a tile
+// (TileMask); inside(N) keeps only the tiles wholly inside the atlas
+// (OwnedTiles: an edge tile partly outside it is never pure), so the last
+// pixels of a row or column may have none.
+struct TileGrid {
+  static constexpr int kShift = 3;
+  int width = 0;
+  static TileGrid covering(int N) { return {((N - 1) >> kShift) + 1}; }
+  static TileGrid inside(int N) { return {N >> kShift}; }
+  std::size_t size() const { return std::size_t(width) * width; }
+  // Pixel (x, y) has a tile (x, y >= 0).
+  bool has(int x, int y) const { return (x >> kShift) < width && (y >> kShift) < width; }
+  // The tile of pixel (x, y), which has one.
+  std::size_t at(int x, int y) const { return std::size_t(y >> kShift) * width + std::size_t(x >> kShift); }
+  // pred(tile) holds for some tile under pixel box [x0, x1] x [y0, y1]
+  // (clamped to the grid); tried row by row, stopping at the first.
+  template <class Pred>
+  bool any_tile(int x0, int y0, int x1, int y1, Pred&& pred) const {
+    const int tx0 = std::max(0, x0) >> kShift, tx1 = std::min(width - 1, std::max(0, x1) >> kShift);
+    const int ty0 = std::max(0, y0) >> kShift, ty1 = std::min(width - 1, std::max(0, y1) >> kShift);
     for (int ty = ty0; ty <= ty1; ++ty)
       for (int tx = tx0; tx <= tx1; ++tx)
-        if (marked[std::size_t(ty) * width + std::size_t(tx)]) return true;
+        if (pred(std::size_t(ty) * width + std::size_t(tx))) return true;
     return false;
+  }
+};
+
+namespace {
+
+// Tiles marked where a draw may matter: the merge test's second draw only
+// looks at its candidates' texels, so a patch triangle whose pixels all lie
+// in unmarked tiles can be left out.
+struct TileMask {
+  TileGrid grid;
+  std::vector<uint8_t> marked;
+  explicit TileMask(int N) : grid(TileGrid::covering(N)), marked(grid.size(), 0) {}
+  void mark(int x, int y) { marked[grid.at(x, y)] = 1; }
+  // Any marked tile under pixel box [x0, x1] x [y0, y1] (clamped to the atlas).
+  bool any(int x0, int y0, int x1, int y1) const {
+    return grid.any_tile(x0, y0, x1, y1, [&](std::size_t t) { return marked[t] != 0; });
   }
 };
 
@@ -372,29 +399,29 @@ static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double rad
 // counts the texel as kept). Built on fresh keys, all kNoKey: draw_patches
 // is the first step after begin_raster.
 struct OwnedTiles {
-  static constexpr int kShift = 3;
-  int width = 0;
+  TileGrid grid;               // whole tiles only (TileGrid::inside)
   std::vector<int32_t> chart;  // every pixel's chart, or -1 (mixed, outside the charts or the atlas)
   std::unique_ptr<std::atomic<uint32_t>[]> open;
   std::unique_ptr<std::atomic<uint64_t>[]> max_key;
 
-  explicit OwnedTiles(const RasterContext& ctx) : width(ctx.N >> kShift) {
-    const std::size_t n = std::size_t(width) * width;
+  explicit OwnedTiles(const RasterContext& ctx) : grid(TileGrid::inside(ctx.N)) {
+    constexpr int s = TileGrid::kShift;
+    const std::size_t n = grid.size(), width = std::size_t(grid.width);
     chart.assign(n, -1);
     open = std::make_unique<std::atomic<uint32_t>[]>(n);
     max_key = std::make_unique<std::atomic<uint64_t>[]>(n);
     const auto& tri_of = ctx.atlas.texels.triangle;
     const auto& chart_of = ctx.atlas.chart_of_triangle;
     const std::size_t N = std::size_t(ctx.N);
-    parallel_for(std::size_t(width), [&](std::size_t b, std::size_t e) {
+    parallel_for(width, [&](std::size_t b, std::size_t e) {
       for (std::size_t ty = b; ty < e; ++ty)
-        for (std::size_t tx = 0; tx < std::size_t(width); ++tx) {
+        for (std::size_t tx = 0; tx < width; ++tx) {
           const std::size_t t = ty * width + tx;
-          open[t].store(1u << (2 * kShift), std::memory_order_relaxed);
+          open[t].store(1u << (2 * s), std::memory_order_relaxed);
           max_key[t].store(0, std::memory_order_relaxed);
           int32_t c = -2;
-          for (std::size_t y = ty << kShift; y < (ty + 1) << kShift && c != -1; ++y)
-            for (std::size_t x = tx << kShift; x < (tx + 1) << kShift; ++x) {
+          for (std::size_t y = ty << s; y < (ty + 1) << s && c != -1; ++y)
+            for (std::size_t x = tx << s; x < (tx + 1) << s; ++x) {
               const int32_t idx = ctx.index[y * N + x];
               const int32_t ci = idx < 0 ? -1 : chart_of[tri_of[idx]];
               if (c == -2) c = ci;
@@ -407,9 +434,8 @@ struct OwnedTiles {
   }
   // A texel of pixel (x, y) got its first key.
   void first_write(int x, int y, uint64_t key) {
-    const int tx = x >> kShift, ty = y >> kShift;
-    if (tx >= width || ty >= width) return;
-    const std::size_t t = std::size_t(ty) * width + tx;
+    if (!grid.has(x, y)) return;
+    const std::size_t t = grid.at(x, y);
     if (chart[t] < 0) return;
     uint64_t cur = max_key[t].load(std::memory_order_relaxed);
     while (cur < key && !max_key[t].compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
@@ -419,18 +445,11 @@ struct OwnedTiles {
   // Every pixel of box [x0, x1] x [y0, y1] (clamped to the atlas) is a texel of
   // `c` whose key is below `key`.
   bool kept_below(int x0, int y0, int x1, int y1, int c, uint64_t key) const {
-    const int last = (width << kShift) - 1;
-    if (x1 > last || y1 > last) return false;
-    const int tx0 = std::max(0, x0) >> kShift, tx1 = x1 >> kShift;
-    const int ty0 = std::max(0, y0) >> kShift, ty1 = y1 >> kShift;
-    for (int ty = ty0; ty <= ty1; ++ty)
-      for (int tx = tx0; tx <= tx1; ++tx) {
-        const std::size_t t = std::size_t(ty) * width + tx;
-        if (chart[t] != c || open[t].load(std::memory_order_acquire) != 0 ||
-            max_key[t].load(std::memory_order_relaxed) >= key)
-          return false;
-      }
-    return true;
+    if (!grid.has(x1, y1)) return false;  // the box reaches past the whole tiles
+    return !grid.any_tile(x0, y0, x1, y1, [&](std::size_t t) {
+      return chart[t] != c || open[t].load(std::memory_order_acquire) != 0 ||
+             max_key[t].load(std::memory_order_relaxed) >= key;
+    });
   }
 };
 
@@ -448,6 +467,25 @@ struct ChartTriangle {
   bool ring = false;   // test the pixels around it for a seam (see rasterize_patch)
 };
 
+// Pixel box [x0, x1] x [y0, y1]; empty when x0 > x1 or y0 > y1.
+struct PixelBox {
+  int x0 = INT32_MAX, y0 = INT32_MAX, x1 = INT32_MIN, y1 = INT32_MIN;
+  bool empty() const { return x0 > x1 || y0 > y1; }
+  std::size_t width() const { return std::size_t(x1 - x0 + 1); }
+  std::size_t height() const { return std::size_t(y1 - y0 + 1); }
+};
+
+// The joint pixel box of the triangles not marked in `skip` (of all without it).
+PixelBox joint_box(const ChartTriangle* tris, std::size_t count, const uint8_t* skip = nullptr) {
+  PixelBox b;
+  for (std::size_t k = 0; k < count; ++k) {
+    if (skip && skip[k]) continue;
+    b.x0 = std::min(b.x0, tris[k].x0), b.y0 = std::min(b.y0, tris[k].y0);
+    b.x1 = std::max(b.x1, tris[k].x1), b.y1 = std::max(b.y1, tris[k].y1);
+  }
+  return b;
+}
+
 // The in-chart triangles of one patch and chart: first each pixel of their
 // joint bounding box learns the lowest-index triangle covering it (a small
 // buffer in cache), then one row-ordered sweep does the erosion test and the
@@ -458,23 +496,17 @@ struct ChartTriangle {
 template <class Sink>
 void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::size_t patch_index, const ChartTriangle* tris,
                       std::size_t count, std::vector<int32_t>& local, uint8_t* leaky, RasterCounters& counters) {
-  int bx0 = INT32_MAX, by0 = INT32_MAX, bx1 = INT32_MIN, by1 = INT32_MIN;
-  for (std::size_t k = 0; k < count; ++k) {
-    bx0 = std::min(bx0, tris[k].x0), by0 = std::min(by0, tris[k].y0);
-    bx1 = std::max(bx1, tris[k].x1), by1 = std::max(by1, tris[k].y1);
-  }
-  if (bx0 > bx1 || by0 > by1) return;
-  {
-  const std::size_t W = std::size_t(bx1 - bx0 + 1), H = std::size_t(by1 - by0 + 1);
+  PixelBox box = joint_box(tris, count);
+  if (box.empty()) return;
+  const int chart = tris[0].chart;
+  const auto& tri_of = ctx.atlas.texels.triangle;
+  const auto& chart_of = ctx.atlas.chart_of_triangle;
   // A patch whose pieces lie far apart in one chart would make the joint box
   // huge: draw its triangles one by one instead.
   std::size_t area = 0;
   for (std::size_t k = 0; k < count; ++k)
     area += std::size_t(tris[k].x1 - tris[k].x0 + 1) * std::size_t(tris[k].y1 - tris[k].y0 + 1);
-  if (W * H > 16 * area + 4096) {
-    const int chart = tris[0].chart;
-    const auto& tri_of = ctx.atlas.texels.triangle;
-    const auto& chart_of = ctx.atlas.chart_of_triangle;
+  if (box.width() * box.height() > 16 * area + 4096) {
     for (std::size_t k = 0; k < count; ++k) {
       const ChartTriangle& t = tris[k];
       const Vec2 P[3] = {t.bary.p0, t.bary.p0 + t.bary.e1, t.bary.p0 + t.bary.e2};
@@ -484,41 +516,35 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
     }
     return;
   }
-  }
-  const int chart = tris[0].chart;
-  const auto& tri_of = ctx.atlas.texels.triangle;
-  const auto& chart_of = ctx.atlas.chart_of_triangle;
   const int Nm1 = ctx.N - 1;
   // Triangles wholly in tiles older patches keep (the ring pixels included):
   // no texel to win and no seam to find. A triangle already known to cross
   // one (leaky) goes through the fallback as before. The buffer then spans
   // the others' box only.
   const OwnedTiles* owned = sink.owned_tiles();
-  const uint64_t first_key = make_key(patch_index, 0);
   thread_local std::vector<uint8_t> skip;
-  skip.assign(count, 0);
   if (owned) {
-    bx0 = by0 = INT32_MAX, bx1 = by1 = INT32_MIN;
+    const uint64_t first_key = make_key(patch_index, 0);
+    skip.assign(count, 0);
     for (std::size_t k = 0; k < count; ++k) {
       const ChartTriangle& t = tris[k];
       if (!leaky[k] && owned->kept_below(t.x0 - 1, t.y0 - 1, t.x1 + 1, t.y1 + 1, chart, first_key)) {
         skip[k] = 1;
         ++counters.skipped_triangles;
-        continue;
       }
-      bx0 = std::min(bx0, t.x0), by0 = std::min(by0, t.y0);
-      bx1 = std::max(bx1, t.x1), by1 = std::max(by1, t.y1);
     }
-    if (bx0 > bx1 || by0 > by1) return;
+    box = joint_box(tris, count, skip.data());
+    if (box.empty()) return;
   }
-  const std::size_t W = std::size_t(bx1 - bx0 + 1), H = std::size_t(by1 - by0 + 1);
+  const int bx0 = box.x0, by0 = box.y0, bx1 = box.x1, by1 = box.y1;
+  const std::size_t W = box.width(), H = box.height();
   local.assign(W * H, -1);
   // Per row of the box, the columns some triangle covers (the sweep's span).
   thread_local std::vector<int> span_lo, span_hi;
   span_lo.assign(H, INT32_MAX);
   span_hi.assign(H, INT32_MIN);
   for (std::size_t k = 0; k < count; ++k) {
-    if (skip[k]) continue;
+    if (owned && skip[k]) continue;
     const ChartTriangle& t = tris[k];
     // Barycentric slack of one pixel per edge: pixel centres within 1 px
     // outside the triangle only serve the leak test (a seam cutting a sliver
@@ -1100,7 +1126,7 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
   if (!any) return merged;
   const TexelMap& tm = ctx.atlas.texels;
   std::vector<uint64_t> alt(tm.size(), 0);
-  TileMask clip(ctx.N, 3);
+  TileMask clip(ctx.N);
   const double cell = ctx.radius;
   auto cell_of = [&](const Vec3& x) {
     return std::array<int64_t, 3>{int64_t(std::floor(x.x / cell)), int64_t(std::floor(x.y / cell)),
