@@ -89,7 +89,10 @@ void run_bake(BakeCli& c) {
       {"none", ExrCompression::None}, {"rle", ExrCompression::Rle}};
   o.exr.compression = compressions.at(c.compression);
   o.raster.mode = parse_raster_mode(c.mode);
-  if (c.paper) o.raster.use_paper_hole_filling();
+  if (c.paper) {
+    o.raster.use_paper_hole_filling();
+    o.patch.anticipate = 0;
+  }
   o.keep_states = parse_keep_states(c.keep_states);
   if (o.track_only) o.keep_states = -1;  // render needs every frame's
   bake_with_progress(o);
@@ -246,6 +249,15 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                  "random (from seed and patch id) or world:x,y,z (u along that direction on the tangent plane)")
       ->capture_default_str()
       ->group("Patches");
+  CLI::Option* anticipate =
+      cmd.add_option("--anticipate", o.patch.anticipate,
+                     "New patches are born deformed against the flow they will meet (predicted as if the flow were "
+                     "steady, less where it is not) by this fraction of their predicted life, so their distortion "
+                     "falls before it grows and they live longer (0 = the paper's conformal patch; "
+                     "docs/temporal.md)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 1.0))
+          ->group("Erosion");
   cmd.add_option("--delta-max", o.weights.delta_max, "Distortion at which a patch is fully eroded (Sorkine delta)")
       ->capture_default_str()
       ->group("Erosion");
@@ -279,12 +291,14 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
           ->check(CLI::Range(0.0, 1.0))
           ->group("Erosion");
   cmd.add_flag("--paper", c.paper,
-               "The paper's hole filling and retirement as published, for comparisons: every hole a new patch, no "
-               "hysteresis, only patches that won nothing retire (= --small-hole 0 --no-hold --merge 0). The "
-               "population then grows on steady flow and a still liquid keeps churning (docs/temporal.md)")
+               "The paper's patches, hole filling and retirement as published, for comparisons: conformal new "
+               "patches, every hole a new patch, no hysteresis, only patches that won nothing retire (= "
+               "--anticipate 0 --small-hole 0 --no-hold --merge 0). The population then grows on steady flow "
+               "and a still liquid keeps churning (docs/temporal.md)")
       ->excludes(small_hole)
       ->excludes(hold)
       ->excludes(merge)
+      ->excludes(anticipate)
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "

@@ -332,9 +332,14 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
         update_weights(cur.mesh, o.patch.radius, o.weights, patches);
         st.seconds_weights = clock.lap();
       }
+      // New patches (seeding, hole filling) see this frame's flow.
+      PatchOptions born = o.patch;
+      born.velocity = &cur.velocity;
+      born.previous_velocity = prev ? &prev->velocity : nullptr;
+      born.dt = 1.0 / o.fps;
       if (patches.patches.empty() && !cur.mesh.empty()) {
         // Steps 1-3 on the first frame, and after the liquid vanished.
-        seed_patches(*cur.surface, cur.number, o.patch, o.seeding, o.weights, patches);
+        seed_patches(*cur.surface, cur.number, born, o.seeding, o.weights, patches);
         st.patches_born += patches.patches.size();
         st.seconds_seed = clock.lap();
       }
@@ -353,7 +358,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
         st.tracking.seconds_draw = step.lap();
         const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
         fill_holes(t, patches, cur.number,
-                   surface_patch_maker(*cur.surface, adjacency, o.patch, o.weights, cur.number));
+                   surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number));
         st.tracking.seconds_holes = step.lap();
         resolve_texels(t, patches);
         st.tracking.seconds_resolve = step.lap();

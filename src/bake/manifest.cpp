@@ -127,6 +127,8 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   s["remesh"] = text(o.patch.remesh);
   s["remesher"] = text(int(o.patch.remesher));
   s["remesh_edge"] = text(o.patch.remesh_edge);
+  s["anticipate"] = text(o.patch.anticipate);
+  s["anticipate_horizon"] = text(o.patch.anticipate_horizon);
   s["align"] = o.patch.align ? fmt::format("{},{},{}", o.patch.align_direction.x, o.patch.align_direction.y,
                                            o.patch.align_direction.z)
                              : "random";

@@ -125,6 +125,8 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   s.read("remesh", o.patch.remesh);
   s.read_enum("remesher", o.patch.remesher, 3);
   s.read("remesh_edge", o.patch.remesh_edge);
+  s.read("anticipate", o.patch.anticipate);
+  s.read("anticipate_horizon", o.patch.anticipate_horizon);
   s.read("advect_max_step_fraction", o.advect.max_step_fraction);
   s.read("advect_max_turn", o.advect.max_turn);
   s.read("advect_max_projection", o.advect.max_projection);

@@ -336,3 +336,79 @@ TEST(PatchesFlatten, SolverFailsWhereTheReferenceFails) {
   EXPECT_FALSE(flatten(tiny, uv));
   EXPECT_EQ(uv, (std::vector<Vec2>{{7, 7}}));  // untouched on failure
 }
+
+// Anticipated shear: under a steady simple shear v = (g (y - 1), 0, 0) a new patch
+// is laid with the inverse of the flow's deformation over `anticipate` of its
+// predicted life, so the flow itself brings its distortion down to 1 (that
+// many frames later) before raising it again; the texture disk still has the
+// patch's area; a flow without strain (a translation), or one that changed
+// since the previous frame, changes nothing.
+TEST(PatchesCreate, AnticipatedShearIsUndoneByTheFlow) {
+  const TriMesh plane = test::plane_grid(80, 80, 2.0, 2.0);
+  SurfaceQuery q(plane);
+  const double g = 1.5, dt = 1.0 / 24;
+  const VelocityField shear = [g](const Vec3& x) { return Vec3{g * (x.y - 1), 0, 0}; };
+  PatchOptions o;
+  o.radius = 0.1;
+  o.anticipate = 0.5;
+  o.velocity = &shear;
+  o.dt = dt;
+  WeightOptions w;
+  const Vec3 p{1.0, 1.0, 0};
+  const auto patch = create_patch(q, {p, {0, 0, 1}, -1}, 7, 0, o, w);
+  ASSERT_TRUE(patch.has_value());
+  // Frames until a conformal patch reaches delta_max under this shear: the
+  // map I + g t e_x e_y^T has delta = k/2 + sqrt(1 + k^2/4) with k = g t.
+  int life = 0;
+  for (int n = 1; n < 1000 && !life; ++n) {
+    const double k = g * n * dt;
+    if (0.5 * k + std::sqrt(1 + 0.25 * k * k) >= w.delta_max) life = n;
+  }
+  const double m = o.anticipate * life;  // frames until the patch is undistorted
+  auto median_delta = [&](const Patch& pt) {
+    std::vector<double> d(pt.triangle_delta.begin(), pt.triangle_delta.end());
+    std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+    return d[d.size() / 2];
+  };
+  const double k0 = g * m * dt, born = 0.5 * k0 + std::sqrt(1 + 0.25 * k0 * k0);
+  EXPECT_NEAR(median_delta(*patch), born, 0.02);
+  // The flow over m frames (exact for a steady shear).
+  Patch later = *patch;
+  for (Vec3& x : later.positions) x.x += g * (x.y - 1) * m * dt;
+  patch_weights(plane, o.radius, w, later);
+  for (float d : later.triangle_delta) EXPECT_NEAR(d, 1.0, 0.02);
+  // Area: uv area times (2r)^2 is the 3D area (the stretch has determinant 1).
+  double a3 = 0, auv = 0;
+  for (const Tri& f : patch->triangles) {
+    a3 += 0.5 * norm(cross(patch->positions[f[1]] - patch->positions[f[0]], patch->positions[f[2]] - patch->positions[f[0]]));
+    auv += signed_area(patch->rest_uv, f);
+  }
+  EXPECT_NEAR(auv * 4 * o.radius * o.radius, a3, 1e-3 * a3);
+  // The texture disk is covered: every rest uv direction from the centre reaches 0.5.
+  for (int k = 0; k < 16; ++k) {
+    const double a = 2 * M_PI * k / 16;
+    int t = -1;
+    point_at_uv(*patch, {0.5 + 0.45 * std::cos(a), 0.5 + 0.45 * std::sin(a)}, &t);
+    EXPECT_GE(t, 0) << "direction " << k;
+  }
+  // The prediction assumes a steady flow: with the previous frame's field
+  // the same, nothing changes; where the flow changed since (here it
+  // reversed), the patch is the conformal one, bit for bit.
+  const auto plain = create_patch(q, {p, {0, 0, 1}, -1}, 7, 0, PatchOptions{.radius = 0.1}, w);
+  o.previous_velocity = &shear;
+  const auto steady = create_patch(q, {p, {0, 0, 1}, -1}, 7, 0, o, w);
+  ASSERT_TRUE(plain && steady);
+  EXPECT_EQ(steady->rest_uv, patch->rest_uv);
+  const VelocityField reversed = [g](const Vec3& x) { return Vec3{-g * (x.y - 1), 0, 0}; };
+  o.previous_velocity = &reversed;
+  const auto unsteady = create_patch(q, {p, {0, 0, 1}, -1}, 7, 0, o, w);
+  ASSERT_TRUE(unsteady);
+  EXPECT_EQ(unsteady->rest_uv, plain->rest_uv);
+  o.previous_velocity = nullptr;
+  // A translation has no strain: the conformal patch, bit for bit.
+  const VelocityField slide = [](const Vec3&) { return Vec3{0.3, 0.1, 0}; };
+  o.velocity = &slide;
+  const auto slid = create_patch(q, {p, {0, 0, 1}, -1}, 7, 0, o, w);
+  ASSERT_TRUE(slid);
+  EXPECT_EQ(plain->rest_uv, slid->rest_uv);
+}

@@ -102,6 +102,21 @@ struct PatchOptions {
   bool align = false;
   Vec3 align_direction{1, 0, 0};
   uint64_t seed = 0;
+  /// Anticipated shear (docs/temporal.md, "Anticipated shear"): a new patch
+  /// is laid on the surface already deformed by the inverse of what the
+  /// local flow will do to it over `anticipate` of its predicted life, so
+  /// its distortion falls towards 1 before it grows and it lives longer
+  /// before erosion retires it; scaled down where the flow is unsteady.
+  /// 0 = the paper's conformal patch. Needs `velocity`: the frame's field
+  /// (not owned); without it every patch is conformal.
+  double anticipate = 0.5;
+  const VelocityField* velocity = nullptr;
+  /// The previous frame's field (not owned; null on a first frame): the
+  /// prediction assumes a steady flow, so it is scaled down where the flow
+  /// changed since that frame.
+  const VelocityField* previous_velocity = nullptr;
+  double dt = 1.0 / 24;            ///< seconds per frame, for the prediction
+  int anticipate_horizon = 48;     ///< frames looked ahead at most
 };
 
 struct SeedOptions {
