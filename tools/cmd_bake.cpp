@@ -271,6 +271,14 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
           ->capture_default_str()
           ->check(CLI::Range(0.0, 1.0))
           ->group("Erosion");
+  CLI::Option* rest_hole =
+      cmd.add_option("--rest-hole", o.raster.rest_hole,
+                     "Holes no wider than this times the radius whose rim is held only by patches at rest (below "
+                     "--min-speed) are closed by those patches: the strip a slowly spreading still liquid uncovers "
+                     "continues their texture instead of a new patch popping in (0 = --small-hole there too)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 4.0))
+          ->group("Erosion");
   CLI::Option* hold =
       cmd.add_flag("--hold,!--no-hold", o.raster.hold,
                    "Hysteresis of the erosion test where a patch won texels before, so a texel does not change "
@@ -293,9 +301,10 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_flag("--paper", c.paper,
                "The paper's patches, hole filling and retirement as published, for comparisons: conformal new "
                "patches, every hole a new patch, no hysteresis, only patches that won nothing retire (= "
-               "--anticipate 0 --small-hole 0 --no-hold --merge 0). The population then grows on steady flow "
+               "--anticipate 0 --small-hole 0 --rest-hole 0 --no-hold --merge 0). The population then grows on steady flow "
                "and a still liquid keeps churning (docs/temporal.md)")
       ->excludes(small_hole)
+      ->excludes(rest_hole)
       ->excludes(hold)
       ->excludes(merge)
       ->excludes(anticipate)

@@ -112,6 +112,7 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   m.hold = o.raster.hold;
   m.hold_margin = o.raster.hold_margin;
   m.small_hole = o.raster.small_hole;
+  m.rest_hole = o.raster.rest_hole;
   m.merge = o.raster.merge;
   m.delta_max = o.weights.delta_max;
   m.resolution = o.atlas.resolution;
@@ -185,6 +186,7 @@ nlohmann::json manifest_json(const BakeManifest& m) {
                             {"hold", m.hold},
                             {"hold_margin", m.hold_margin},
                             {"small_hole", m.small_hole},
+                            {"rest_hole", m.rest_hole},
                             {"merge", m.merge},
                             {"delta_max", m.delta_max},
                             {"resolution", m.resolution},
@@ -327,6 +329,7 @@ BakeManifest parse_bake_manifest(const std::string& text, const std::string& pat
     m.hold = j.value("hold", false);
     m.hold_margin = j.value("hold_margin", 0.0);
     m.small_hole = j.value("small_hole", 0.0);
+    m.rest_hole = j.value("rest_hole", 0.0);  // absent before stop 24: no such rule
     m.merge = j.value("merge", 0.0);
     m.delta_max = j.value("delta_max", 0.0);
     m.resolution = whole_number<int>(j, "resolution", 0, path.string());

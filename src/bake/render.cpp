@@ -116,6 +116,7 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   o.raster.hold = m.hold;
   o.raster.hold_margin = m.hold_margin;
   o.raster.small_hole = m.small_hole;
+  o.raster.rest_hole = m.rest_hole;
   o.raster.merge = m.merge;
   o.weights.delta_max = m.delta_max;
   o.atlas.resolution = m.resolution;

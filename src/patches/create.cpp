@@ -251,15 +251,14 @@ struct Prediction {
 };
 
 double delta_of(const Eigen::Matrix2d& F) {
-  const Eigen::Vector2d s = Eigen::JacobiSVD<Eigen::Matrix2d>(F).singularValues();
-  return s(1) > 0 ? std::max(s(0), 1 / s(1)) : INFINITY;
+  const Eigen::Matrix2d G = F.transpose() * F;
+  return detail::delta_from_gram(G(0, 0), G(0, 1), G(1, 1));
 }
 
 Prediction predict_stretch(const SurfaceQuery& surface, const Vec3& p, const Vec3& n_p, const PatchOptions& options,
                            double delta_max) {
   Prediction out;
-  out.t1 = normalized(std::abs(n_p.x) < 0.9 ? cross(n_p, Vec3{1, 0, 0}) : cross(n_p, Vec3{0, 1, 0}));
-  out.t2 = cross(n_p, out.t1);
+  detail::tangent_frame(n_p, out.t1, out.t2);
   const double r = options.radius, dt = options.dt;
   const VelocityField& v = *options.velocity;
   constexpr int kRing = 8;
@@ -278,12 +277,14 @@ Prediction predict_stretch(const SurfaceQuery& surface, const Vec3& p, const Vec
   // Unsteadiness: how much the velocity at the probes changed since the
   // previous frame, against the speed there.
   double anticipate = options.anticipate;
+  // The velocity at the probes, where the first step starts.
+  std::vector<Vec3> vx(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) vx[i] = v(x[i]);
   if (options.previous_velocity) {
     double change = 0, speed = 0;
-    for (const Vec3& q : x) {
-      const Vec3 now = v(q);
-      change += norm(now - (*options.previous_velocity)(q));
-      speed += norm(now);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      change += norm(vx[i] - (*options.previous_velocity)(x[i]));
+      speed += norm(vx[i]);
     }
     // Median births see 0.04 on channel (a steady stream), 0.18 on
     // dam_break and 0.45 on splash: full anticipation up to 0.1, none from 0.3.
@@ -297,8 +298,9 @@ Prediction predict_stretch(const SurfaceQuery& surface, const Vec3& p, const Vec
   int life = options.anticipate_horizon;
   for (int k = 1; k <= options.anticipate_horizon; ++k) {
     bool lost = false, moved = false;
-    for (Vec3& q : x) {
-      const Vec3 k1 = v(q), k2 = v(q + k1 * dt);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      Vec3& q = x[i];
+      const Vec3 k1 = k == 1 ? vx[i] : v(q), k2 = v(q + k1 * dt);
       const ClosestHit hit = surface.closest(q + (k1 + k2) * (0.5 * dt), r);
       if (!hit.found) lost = true;
       else moved |= hit.point != q, q = hit.point;
@@ -384,6 +386,132 @@ void trim_to_texture_disk(Patch& patch) {
   patch.surface_triangle = gather(patch.surface_triangle, used);
 }
 
+// Steps 2-3 around `at` (its fluid triangle `seed`, normal n_p), the cut
+// reaching `reach` from p: r, or farther for an anticipated patch, whose
+// texture covers an ellipse on the surface. Weights are left to the caller.
+std::optional<Patch> lay_patch(const SurfaceQuery& surface, const SurfaceAdjacency& adjacency, int seed,
+                               const SurfacePoint& at, const Vec3& n_p, double reach, uint32_t id, int frame,
+                               const PatchOptions& options, detail::PatchTrace& trace) {
+  const TriMesh& fluid = surface.mesh();
+  const double r = options.radius;
+  // Remeshing relaxes vertices tangentially without projecting them back
+  // (CGAL's projection builds an AABB tree per patch, half the cost of the
+  // remesh); this snap onto the fluid also finds the triangle under each
+  // vertex, which the fold test and the rasterizer need.
+  std::vector<int32_t> under;
+  auto snap = [&](PatchMesh& m) {
+    under.assign(m.positions.size(), -1);
+    for (std::size_t v = 0; v < m.positions.size(); ++v) {
+      // A small radius first (remeshed vertices are within the chord error
+      // of the fluid): the same closest point when there is one, found faster.
+      ClosestHit hit = surface.closest(m.positions[v], r / 64);
+      if (!hit.found) hit = surface.closest(m.positions[v], 0.25 * r);
+      if (!hit.found) continue;
+      // Project once more from the snapped point: that is what advection does
+      // next frame, and on a shared edge it may pick the other triangle; doing
+      // it now makes a still scene bake identical atlases from frame 1 on.
+      // The snapped point is on the surface up to rounding, so a tiny radius
+      // finds the same answer as r/4 with a cheaper search.
+      const ClosestHit again = surface.closest(hit.point, 1e-6 * r);
+      if (again.found) hit = again;
+      under[v] = hit.triangle;
+      m.positions[v] = hit.point;
+    }
+  };
+  std::vector<Vec2> uv;
+  bool flat = false;
+  PatchMesh mesh;
+  if (options.remesh && options.remesher == Remesher::Lattice) {
+    // Resampling needs the fluid up to one lattice edge beyond r (the
+    // triangles within r reach that far); where the cut is no height field
+    // over the tangent plane, the isotropic remesher takes the usual cut below.
+    // The remesher's edges lie between 4/5 and 4/3 of its target and average
+    // 0.83 of it (0.139 r for r/6 on dam_break); a lattice of 0.8 of the
+    // target gives the same vertex density, so the same weights (B_V = 0 on
+    // the border weighs more in a coarser patch). docs/patches.md.
+    constexpr double kLatticeEdge = 0.8;
+    const double edge = kLatticeEdge * options.remesh_edge * r;
+    std::vector<int32_t> cut_triangles;
+    const PatchMesh wide = cut_patch(fluid, adjacency, seed, at.position, n_p, reach + edge, &cut_triangles);
+    trace.lattice = detail::lattice_resample(surface, wide, cut_triangles, at.position, n_p, reach, edge, mesh, under);
+    if (trace.lattice == detail::LatticeResult::Resampled &&
+        detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) {
+      flat = true;
+      trace.path = PatchPath::Lattice;
+    }
+  }
+  if (!flat) mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, reach);
+  if (options.remesh && !flat) {
+    PatchMesh remeshed = mesh;
+    // When the fluid triangles are much larger than r the cut is far larger
+    // than the patch; cap the remeshed size (before trimming) so one patch
+    // never costs more than a few thousand triangles.
+    double area = 0;
+    for (const Tri& f : mesh.triangles)
+      area += 0.5 * norm(cross(mesh.positions[f[1]] - mesh.positions[f[0]], mesh.positions[f[2]] - mesh.positions[f[0]]));
+    constexpr double kMaxRemeshTriangles = 4000;
+    const double edge = std::max(options.remesh_edge * r, std::sqrt(area / (0.433 * kMaxRemeshTriangles)));
+    const bool remeshed_ok = options.remesher == Remesher::CgalIsotropic ? detail::cgal_remesh(remeshed, edge)
+                                                                : detail::isotropic_remesh(remeshed, edge);
+    if (remeshed_ok) {
+      trim_to_ball(remeshed, at.position, reach);
+      snap(remeshed);
+      if (detail::lscm_flatten(remeshed.positions, remeshed.triangles, uv)) {
+        mesh = std::move(remeshed);
+        flat = true;
+        trace.path = PatchPath::Remeshed;
+      }
+    }
+  }
+  if (!flat) {
+    trace.path = PatchPath::Cut;
+    snap(mesh);
+    if (!detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) return std::nullopt;
+  }
+
+  // p's uv: barycentric in the patch triangle closest to p.
+  int host = -1;
+  double best = INFINITY, hb1 = 0, hb2 = 0;
+  double area3 = 0, area_uv = 0;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    const Tri& f = mesh.triangles[t];
+    const Vec3 &a = mesh.positions[f[0]], &b = mesh.positions[f[1]], &c = mesh.positions[f[2]];
+    area3 += 0.5 * norm(cross(b - a, c - a));
+    area_uv += 0.5 * cross(uv[f[1]] - uv[f[0]], uv[f[2]] - uv[f[0]]);
+    const TrianglePoint q = closest_point_on_triangle(at.position, a, b, c);
+    const double d = norm2(q.point - at.position);
+    if (d < best) best = d, host = t, hb1 = q.b1, hb2 = q.b2;
+  }
+  if (host < 0 || !(area_uv > 0) || !(area3 > 0)) return std::nullopt;
+  const Tri& hf = mesh.triangles[host];
+  const Vec2 uv_p = uv[hf[0]] * (1 - hb1 - hb2) + uv[hf[1]] * hb1 + uv[hf[2]] * hb2;
+
+  // Step 3 placement: uniform scale so uv area * (2r)^2 = 3D area, then rotate.
+  const double scale = std::sqrt(area3 / area_uv) / (2 * r);
+  double angle = 2 * M_PI * hash_to_unit(hash64(options.seed, id, 0x9a7c4e5ull));
+  if (options.align) {
+    const Vec3 t = options.align_direction - n_p * dot(options.align_direction, n_p);
+    const Vec2 d = uv_direction(mesh.positions[hf[0]], mesh.positions[hf[1]], mesh.positions[hf[2]], uv[hf[0]],
+                                uv[hf[1]], uv[hf[2]], t);
+    if (norm(d) > 0 && norm(t) > 1e-9 * norm(options.align_direction)) angle = -std::atan2(d.y, d.x);
+  }
+  const double cs = std::cos(angle) * scale, sn = std::sin(angle) * scale;
+  Patch patch;
+  patch.id = id;
+  patch.birth_frame = frame;
+  patch.center = at.position;
+  patch.center_normal = n_p;
+  patch.rest_uv.resize(uv.size());
+  for (std::size_t v = 0; v < uv.size(); ++v) {
+    const Vec2 d = uv[v] - uv_p;
+    patch.rest_uv[v] = {0.5 + cs * d.x - sn * d.y, 0.5 + sn * d.x + cs * d.y};
+  }
+  patch.positions = std::move(mesh.positions);
+  patch.triangles = std::move(mesh.triangles);
+  patch.surface_triangle = std::move(under);
+  return patch;
+}
+
 }  // namespace
 
 namespace detail {
@@ -407,128 +535,8 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
   if (norm2(n_p) == 0) n_p = face_n;
   if (!(dot(face_n, n_p) > 0)) n_p = face_n;  // the rule keeps p's own triangle in every case
 
-  // Steps 2-3 with the cut reaching `reach` from p (r, or farther for an
-  // anticipated patch, whose texture covers an ellipse on the surface).
-  auto lay = [&](double reach) -> std::optional<Patch> {
-    // Remeshing relaxes vertices tangentially without projecting them back
-    // (CGAL's projection builds an AABB tree per patch, half the cost of the
-    // remesh); this snap onto the fluid also finds the triangle under each
-    // vertex, which the fold test and the rasterizer need.
-    std::vector<int32_t> under;
-    auto snap = [&](PatchMesh& m) {
-      under.assign(m.positions.size(), -1);
-      for (std::size_t v = 0; v < m.positions.size(); ++v) {
-        // A small radius first (remeshed vertices are within the chord error
-        // of the fluid): the same closest point when there is one, found faster.
-        ClosestHit hit = surface.closest(m.positions[v], r / 64);
-        if (!hit.found) hit = surface.closest(m.positions[v], 0.25 * r);
-        if (!hit.found) continue;
-        // Project once more from the snapped point: that is what advection does
-        // next frame, and on a shared edge it may pick the other triangle; doing
-        // it now makes a still scene bake identical atlases from frame 1 on.
-        // The snapped point is on the surface up to rounding, so a tiny radius
-        // finds the same answer as r/4 with a cheaper search.
-        const ClosestHit again = surface.closest(hit.point, 1e-6 * r);
-        if (again.found) hit = again;
-        under[v] = hit.triangle;
-        m.positions[v] = hit.point;
-      }
-    };
-    std::vector<Vec2> uv;
-    bool flat = false;
-    PatchMesh mesh;
-    if (options.remesh && options.remesher == Remesher::Lattice) {
-      // Resampling needs the fluid up to one lattice edge beyond r (the
-      // triangles within r reach that far); where the cut is no height field
-      // over the tangent plane, the isotropic remesher takes the usual cut below.
-      // The remesher's edges lie between 4/5 and 4/3 of its target and average
-      // 0.83 of it (0.139 r for r/6 on dam_break); a lattice of 0.8 of the
-      // target gives the same vertex density, so the same weights (B_V = 0 on
-      // the border weighs more in a coarser patch). docs/patches.md.
-      constexpr double kLatticeEdge = 0.8;
-      const double edge = kLatticeEdge * options.remesh_edge * r;
-      std::vector<int32_t> cut_triangles;
-      const PatchMesh wide = cut_patch(fluid, adjacency, seed, at.position, n_p, reach + edge, &cut_triangles);
-      trace.lattice = detail::lattice_resample(surface, wide, cut_triangles, at.position, n_p, reach, edge, mesh, under);
-      if (trace.lattice == detail::LatticeResult::Resampled &&
-          detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) {
-        flat = true;
-        trace.path = PatchPath::Lattice;
-      }
-    }
-    if (!flat) mesh = cut_patch(fluid, adjacency, seed, at.position, n_p, reach);
-    if (options.remesh && !flat) {
-      PatchMesh remeshed = mesh;
-      // When the fluid triangles are much larger than r the cut is far larger
-      // than the patch; cap the remeshed size (before trimming) so one patch
-      // never costs more than a few thousand triangles.
-      double area = 0;
-      for (const Tri& f : mesh.triangles)
-        area += 0.5 * norm(cross(mesh.positions[f[1]] - mesh.positions[f[0]], mesh.positions[f[2]] - mesh.positions[f[0]]));
-      constexpr double kMaxRemeshTriangles = 4000;
-      const double edge = std::max(options.remesh_edge * r, std::sqrt(area / (0.433 * kMaxRemeshTriangles)));
-      const bool remeshed_ok = options.remesher == Remesher::CgalIsotropic ? detail::cgal_remesh(remeshed, edge)
-                                                                  : detail::isotropic_remesh(remeshed, edge);
-      if (remeshed_ok) {
-        trim_to_ball(remeshed, at.position, reach);
-        snap(remeshed);
-        if (detail::lscm_flatten(remeshed.positions, remeshed.triangles, uv)) {
-          mesh = std::move(remeshed);
-          flat = true;
-          trace.path = PatchPath::Remeshed;
-        }
-      }
-    }
-    if (!flat) {
-      trace.path = PatchPath::Cut;
-      snap(mesh);
-      if (!detail::lscm_flatten(mesh.positions, mesh.triangles, uv)) return {};
-    }
-
-    // p's uv: barycentric in the patch triangle closest to p.
-    int host = -1;
-    double best = INFINITY, hb1 = 0, hb2 = 0;
-    double area3 = 0, area_uv = 0;
-    for (int t = 0; t < int(mesh.triangles.size()); ++t) {
-      const Tri& f = mesh.triangles[t];
-      const Vec3 &a = mesh.positions[f[0]], &b = mesh.positions[f[1]], &c = mesh.positions[f[2]];
-      area3 += 0.5 * norm(cross(b - a, c - a));
-      area_uv += 0.5 * cross(uv[f[1]] - uv[f[0]], uv[f[2]] - uv[f[0]]);
-      const TrianglePoint q = closest_point_on_triangle(at.position, a, b, c);
-      const double d = norm2(q.point - at.position);
-      if (d < best) best = d, host = t, hb1 = q.b1, hb2 = q.b2;
-    }
-    if (host < 0 || !(area_uv > 0) || !(area3 > 0)) return {};
-    const Tri& hf = mesh.triangles[host];
-    const Vec2 uv_p = uv[hf[0]] * (1 - hb1 - hb2) + uv[hf[1]] * hb1 + uv[hf[2]] * hb2;
-
-    // Step 3 placement: uniform scale so uv area * (2r)^2 = 3D area, then rotate.
-    const double scale = std::sqrt(area3 / area_uv) / (2 * r);
-    double angle = 2 * M_PI * hash_to_unit(hash64(options.seed, id, 0x9a7c4e5ull));
-    if (options.align) {
-      const Vec3 t = options.align_direction - n_p * dot(options.align_direction, n_p);
-      const Vec2 d = uv_direction(mesh.positions[hf[0]], mesh.positions[hf[1]], mesh.positions[hf[2]], uv[hf[0]],
-                                  uv[hf[1]], uv[hf[2]], t);
-      if (norm(d) > 0 && norm(t) > 1e-9 * norm(options.align_direction)) angle = -std::atan2(d.y, d.x);
-    }
-    const double cs = std::cos(angle) * scale, sn = std::sin(angle) * scale;
-    Patch patch;
-    patch.id = id;
-    patch.birth_frame = frame;
-    patch.center = at.position;
-    patch.center_normal = n_p;
-    patch.rest_uv.resize(uv.size());
-    for (std::size_t v = 0; v < uv.size(); ++v) {
-      const Vec2 d = uv[v] - uv_p;
-      patch.rest_uv[v] = {0.5 + cs * d.x - sn * d.y, 0.5 + sn * d.x + cs * d.y};
-    }
-    patch.positions = std::move(mesh.positions);
-    patch.triangles = std::move(mesh.triangles);
-    patch.surface_triangle = std::move(under);
-    return patch;
-  };
   if (!(options.anticipate > 0 && options.velocity)) {
-    std::optional<Patch> patch = lay(r);
+    std::optional<Patch> patch = lay_patch(surface, adjacency, seed, at, n_p, r, id, frame, options, trace);
     if (patch) patch_weights(fluid, r, weights, *patch);
     return patch;
   }
@@ -539,7 +547,8 @@ std::optional<Patch> create_patch_traced(const SurfaceQuery& surface, const Surf
   const Prediction pred = predict_stretch(surface, at.position, n_p, options, weights.delta_max);
   const double reach = Eigen::JacobiSVD<Eigen::Matrix2d>(pred.V).singularValues()(0);
   const bool wide = reach > 1 + 1e-9;
-  std::optional<Patch> patch = lay(wide ? r * (1.1 * reach) : r);
+  std::optional<Patch> patch =
+      lay_patch(surface, adjacency, seed, at, n_p, wide ? r * (1.1 * reach) : r, id, frame, options, trace);
   if (!patch) return std::nullopt;
   if (wide) {
     const Eigen::Matrix2d B = tangent_to_uv(*patch, at.position, pred, r);

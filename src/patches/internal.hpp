@@ -1,6 +1,7 @@
 #pragma once
 // Internal pieces of the patch stages (seed, create, flatten, advect, weights)
 // shared between their translation units and the tests. Not public API.
+#include <cmath>
 #include <vector>
 
 #include "lapflow/patches/patches.hpp"
@@ -41,6 +42,21 @@ bool isotropic_remesh(PatchMesh& mesh, double target_edge, int iterations = 1);
 /// (edge-connected groups around it), so the mesh becomes manifold at vertices.
 /// Requires every edge to have at most two consistently oriented triangles.
 void split_nonmanifold_vertices(PatchMesh& mesh);
+
+/// Right-handed orthonormal frame (t1, t2, n) of unit normal n: t1 from the
+/// coordinate axis least aligned with n.
+inline void tangent_frame(const Vec3& n, Vec3& t1, Vec3& t2) {
+  const Vec3 axis = std::fabs(n.x) <= std::fabs(n.y) && std::fabs(n.x) <= std::fabs(n.z) ? Vec3{1, 0, 0}
+                    : std::fabs(n.y) <= std::fabs(n.z)                                  ? Vec3{0, 1, 0}
+                                                                                        : Vec3{0, 0, 1};
+  t1 = normalized(cross(axis, n));
+  t2 = cross(n, t1);
+}
+
+/// Sorkine's delta = max(s1, 1/s2) of a linear map whose Gram matrix J^T J
+/// is [[a, b], [b, c]] (s1 >= s2 its singular values, written when asked);
+/// +inf when s2 is 0.
+double delta_from_gram(double a, double b, double c, double* s1 = nullptr, double* s2 = nullptr);
 
 /// Per-triangle distortion of the map rest uv (scaled by `scale`) -> 3D:
 /// singular values s1 >= s2 of its Jacobian; returns delta = max(s1, 1/s2),

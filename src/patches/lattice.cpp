@@ -80,11 +80,8 @@ LatticeResult lattice_resample(const SurfaceQuery& surface, const PatchMesh& cut
                          const Vec3& p, const Vec3& n_p, double r, double edge, PatchMesh& out,
                          std::vector<int32_t>& under, double min_cos) {
   const Vec3 n = normalized(n_p);
-  // Right-handed frame (t1, t2, n): t1 from the axis least aligned with n.
-  const Vec3 axis = std::fabs(n.x) <= std::fabs(n.y) && std::fabs(n.x) <= std::fabs(n.z) ? Vec3{1, 0, 0}
-                    : std::fabs(n.y) <= std::fabs(n.z)                                  ? Vec3{0, 1, 0}
-                                                                                        : Vec3{0, 0, 1};
-  const Vec3 t1 = normalized(cross(axis, n)), t2 = cross(n, t1);
+  Vec3 t1, t2;
+  tangent_frame(n, t1, t2);
   const double L = edge, h = 0.5 * std::sqrt(3.0) * L;
   // Lattice point (i, j) sits at ((i + j/2) L, j h) in the plane. Points are
   // needed up to r + L from p: a triangle within r of p reaches one edge

@@ -27,12 +27,15 @@ double triangle_distortion(const Vec2& u0, const Vec2& u1, const Vec2& u2, const
   // roots of the eigenvalues of the 2x2 Gram matrix J^T J.
   const Vec3 jx = (e1 * d2.y - e2 * d1.y) / det;
   const Vec3 jy = (e2 * d1.x - e1 * d2.x) / det;
-  const double a = dot(jx, jx), b = dot(jx, jy), c = dot(jy, jy);
+  return delta_from_gram(dot(jx, jx), dot(jx, jy), dot(jy, jy), s1_out, s2_out);
+}
+
+double delta_from_gram(double a, double b, double c, double* s1_out, double* s2_out) {
   const double mean = 0.5 * (a + c), dev = std::sqrt(0.25 * (a - c) * (a - c) + b * b);
   const double s1 = std::sqrt(mean + dev), s2 = std::sqrt(std::max(mean - dev, 0.0));
   if (s1_out) *s1_out = s1;
   if (s2_out) *s2_out = s2;
-  if (!(s2 > 0)) return kInf;
+  if (!(s2 > 0)) return std::numeric_limits<double>::infinity();
   return std::max(s1, 1.0 / s2);
 }
 

@@ -78,9 +78,33 @@ std::vector<uint32_t> uncovered_texels(const RasterContext& ctx, Also&& also) {
   return out;
 }
 
+// Whether every covered texel next to hole `id` (its texels `members`,
+// labelled `id`) is won or closed by a patch at rest.
+bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& members,
+                 const std::vector<int32_t>& label, int32_t id) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  bool any = false;
+  for (uint32_t i : members) {
+    const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = x + dx, yy = y + dy;
+        if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
+        const int32_t n = ctx.index[std::size_t(yy) * N + xx];
+        if (n < 0 || label[n] == id || ctx.keys[n] == kNoKey) continue;
+        if (!patches.patches[std::size_t(ctx.keys[n] >> 32)].at_rest) return false;
+        any = true;
+      }
+  }
+  return any;
+}
+
 // How many texel layers hole `id` (its texels `members`, labelled `id`) has
 // inside its rim: 1 for texels next to a covered texel of their chart, 2 for
-// their other neighbours, ... Counts no further than `limit` (returns
+// their other neighbours, ... A hole no covered texel touches (an island of
+// its chart's texels that the atlas image cut off from the rest) is measured
+// from its own edge instead. Counts no further than `limit` (returns
 // limit + 1 for a deeper hole). `depth` is scratch, one entry per chart
 // texel, -1 where unused; it is left that way.
 int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, const std::vector<int32_t>& label,
@@ -108,6 +132,15 @@ int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, c
       layer.push_back(i);
     }
   }
+  if (layer.empty())
+    for (uint32_t i : members) {
+      int inside = 0;  // neighbours in the hole
+      for_neighbours(i, [&](uint32_t n) { inside += label[n] == id; });
+      if (inside < 8) {
+        depth[i] = 1;
+        layer.push_back(i);
+      }
+    }
   int d = 1;
   std::size_t reached = layer.size();
   while (!layer.empty() && d <= limit && reached < members.size()) {
@@ -136,14 +169,17 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   closed = 0;
   // Texel layers a hole may have inside its rim and still be closed by its
   // neighbours: its half-width in texels.
-  const int max_closed_depth = ctx.texel_world_size > 0
-                                   ? int(std::floor(0.5 * ctx.options.small_hole * ctx.radius / ctx.texel_world_size))
-                                   : 0;
+  // A hole held only by patches at rest may be up to rest_hole x r wide.
+  auto half_width = [&](double width) {
+    return ctx.texel_world_size > 0 ? int(std::floor(0.5 * width * ctx.radius / ctx.texel_world_size)) : 0;
+  };
+  const int max_closed_depth = half_width(ctx.options.small_hole);
+  const int max_rest_depth = std::max(max_closed_depth, half_width(ctx.options.rest_hole));
   std::vector<uint32_t> chart_texels(std::size_t(std::max(ctx.atlas.chart_count, 0)), 0);
-  if (max_closed_depth > 0)
+  if (max_rest_depth > 0)
     for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
   std::vector<uint8_t>& closed_texel = ctx.closed;
-  closed_texel.assign(max_closed_depth > 0 ? tm.size() : 0, 0);
+  closed_texel.assign(max_rest_depth > 0 ? tm.size() : 0, 0);
   std::vector<int32_t> depth;  // per chart texel: layer inside its hole (hole_depth's scratch)
   // A fluid triangle where a seed failed (no patch, or a newborn that does
   // not keep its own centre) is not seeded again: its texels go to
@@ -199,11 +235,18 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       // full patch born for each would churn the texture and grow the
       // population without bound. A hole that is its whole chart has no
       // neighbour to close it and always gets a patch.
-      if (max_closed_depth > 0 && members.size() < chart_texels[chart] &&
-          hole_depth(ctx, members, label, holes - 1, depth, max_closed_depth) <= max_closed_depth) {
-        for (uint32_t i : members) closed_texel[i] = 1;
-        closed += members.size();
-        continue;
+      // A still liquid that spreads slowly (below --min-speed) uncovers a
+      // strip at its rim a texel or so a frame, which outgrows small_hole in
+      // a few frames: where only patches at rest hold its rim, the strip is
+      // continued by them up to rest_hole x r (RasterOptions::rest_hole).
+      if (max_rest_depth > 0 && members.size() < chart_texels[chart]) {
+        const int d = hole_depth(ctx, members, label, holes - 1, depth, max_rest_depth);
+        if (d <= max_closed_depth ||
+            (d <= max_rest_depth && rim_at_rest(ctx, patches, members, label, holes - 1))) {
+          for (uint32_t i : members) closed_texel[i] = 1;
+          closed += members.size();
+          continue;
+        }
       }
       if (!make_patch) continue;  // a render: births are the tracking's
       // The member nearest the centroid (ties: lowest texel index), then, for
@@ -474,15 +517,17 @@ void fill_or_close_holes(RasterBuffers& r, PatchSet& patches, int frame, const P
   // the nearest patch triangle in 3D. Counted in forced_texels. Without hole
   // filling the holes are left visible (alpha 0).
   if (options.fill_holes) {
-    // The small holes left to their neighbours are closed here too; what
-    // else propagate_keys fills is forced.
+    // The small holes left to their neighbours are closed here too (an
+    // island of a chart's texels that no covered texel touches, by the
+    // nearest patch in 3D); whatever else is filled is forced.
     const std::size_t propagated = propagate_keys(ctx);
+    const std::size_t nearest = cover_from_nearest_patch(ctx, patches);
     // A render (no maker) has no birth to wait for: whatever its neighbours
     // close is closed, wherever the tracking's decisions left it open.
     if (!make_patch) closed = propagated;
-    st.closed_texels += std::min(closed, propagated);
-    st.forced_texels += propagated - std::min(closed, propagated);
-    st.forced_texels += cover_from_nearest_patch(ctx, patches);
+    const std::size_t filled = make_patch ? propagated + nearest : propagated;
+    st.closed_texels += std::min(closed, filled);
+    st.forced_texels += propagated + nearest - std::min(closed, filled);
   }
 }
 

@@ -284,6 +284,37 @@ TEST(BakeSharedData, DamBreakCoverageOnEveryFrame) {
   expect_full_coverage_on_every_frame("dam_break", 0.08);
 }
 
+TEST(BakeSharedData, ViscousDropSpreadingAtRestBreedsNoPatches) {
+  // viscous_drop from frame 60: every vertex below 5 cm/s, yet the puddle
+  // keeps spreading (its area grows 0.5% a frame), and its rim uncovers a
+  // strip a texel or so wide each frame. Closed by the patches around it
+  // while narrower than --small-hole, the strip outgrew that rule within a
+  // few frames and 1-3 patches a frame popped in from frame 65 (stop 23).
+  // --rest-hole lets the patches at rest that hold its rim continue it: no
+  // birth, the same patches alive, every texel covered.
+  const fs::path data = fs::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
+  if (!fs::exists(data / "viscous_drop.0060.ply")) GTEST_SKIP() << "../shared/data/viscous_drop is not present";
+  BakeOptions o = small_bake(data, fresh_dir("rest_hole_default"));
+  o.mesh_pattern = (data / "viscous_drop.%04d.ply").string();
+  o.frames = FrameRange{60, 70};
+  o.min_speed = 0.05;
+  o.aov = false;
+  const auto held = run(o);
+  o.out_dir = fresh_dir("rest_hole_off").string();
+  o.raster.rest_hole = 0;
+  const auto off = run(o);
+  ASSERT_EQ(held.size(), 11u);
+  ASSERT_EQ(off.size(), 11u);
+  std::size_t off_born = 0;
+  for (std::size_t k = 1; k < held.size(); ++k) {
+    EXPECT_EQ(held[k].patches_born, 0u) << "frame " << held[k].frame;
+    EXPECT_EQ(held[k].patches_alive, held[0].patches_alive) << "frame " << held[k].frame;
+    EXPECT_EQ(held[k].coverage, 1.0) << "frame " << held[k].frame;
+    off_born += off[k].patches_born;
+  }
+  EXPECT_GT(off_born, 0u) << "without --rest-hole the spreading rim must breed patches, or this test shows nothing";
+}
+
 TEST(BakeSharedData, ViscousDropCoverageOnEveryFrame) {
   expect_full_coverage_on_every_frame("viscous_drop", 0.04);
 }

@@ -26,7 +26,7 @@ struct BakeManifest {
   std::string mode = "erosion";      ///< erosion | blend | advect
   double radius = 0, epsilon = 0, delta_max = 0;
   bool hold = false;
-  double hold_margin = 0, small_hole = 0, merge = 0;  ///< RasterOptions::hold_margin, small_hole, merge
+  double hold_margin = 0, small_hole = 0, rest_hole = 0, merge = 0;  ///< RasterOptions::hold_margin, small_hole, rest_hole, merge
   int resolution = 0;
   uint64_t seed = 0;
   bool aov = false, dump_patches = false;

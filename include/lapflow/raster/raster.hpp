@@ -56,6 +56,12 @@ struct RasterOptions {
   /// instead of a new patch (0 = every hole gets a patch, as in the paper).
   /// docs/temporal.md says why, and why 0.25 is the default.
   double small_hole = 0.25;
+  /// The same for a hole whose rim is held only by patches at rest, up to
+  /// this times r (0 = small_hole there too): where a still liquid spreads
+  /// slowly (below --min-speed), the strip it uncovers at its rim is
+  /// continued by the patches that held the rim instead of a new patch
+  /// popping in once the strip has outgrown small_hole. docs/temporal.md.
+  double rest_hole = 2.0;
   /// Hysteresis of the erosion test in patch space (docs/temporal.md): where
   /// a patch has won texels (Patch::held), the test reads the feature map's
   /// maximum and w's within one atlas texel and lowers the bar by
@@ -75,6 +81,7 @@ struct RasterOptions {
   /// the population and hold a still liquid still (docs/temporal.md).
   void use_paper_hole_filling() {
     small_hole = 0.0;
+    rest_hole = 0.0;
     hold = false;
     merge = 0.0;
   }
