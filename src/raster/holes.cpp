@@ -78,24 +78,34 @@ std::vector<uint32_t> uncovered_texels(const RasterContext& ctx, Also&& also) {
   return out;
 }
 
+// Calls f(n) for each chart texel n among chart texel i's 8 neighbours in
+// the atlas image (of any chart), rows first.
+template <class F>
+void for_each_neighbour(const RasterContext& ctx, uint32_t i, F&& f) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = x + dx, yy = y + dy;
+      if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
+      const int32_t n = ctx.index[std::size_t(yy) * N + xx];
+      if (n >= 0) f(uint32_t(n));
+    }
+}
+
 // Whether every covered texel next to hole `id` (its texels `members`,
 // labelled `id`) is won or closed by a patch at rest.
 bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& members,
                  const std::vector<int32_t>& label, int32_t id) {
-  const TexelMap& tm = ctx.atlas.texels;
-  const int N = ctx.N;
-  bool any = false;
+  bool any = false, moving = false;
   for (uint32_t i : members) {
-    const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int xx = x + dx, yy = y + dy;
-        if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
-        const int32_t n = ctx.index[std::size_t(yy) * N + xx];
-        if (n < 0 || label[n] == id || ctx.keys[n] == kNoKey) continue;
-        if (!patches.patches[std::size_t(ctx.keys[n] >> 32)].at_rest) return false;
-        any = true;
-      }
+    for_each_neighbour(ctx, i, [&](uint32_t n) {
+      if (label[n] == id || ctx.keys[n] == kNoKey) return;
+      if (patches.patches[std::size_t(ctx.keys[n] >> 32)].at_rest) any = true;
+      else moving = true;
+    });
+    if (moving) return false;
   }
   return any;
 }
@@ -110,23 +120,11 @@ bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::v
 int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, const std::vector<int32_t>& label,
                int32_t id, std::vector<int32_t>& depth, int limit) {
   const TexelMap& tm = ctx.atlas.texels;
-  const int N = ctx.N;
   if (depth.size() != tm.size()) depth.assign(tm.size(), -1);
-  auto for_neighbours = [&](uint32_t i, auto&& visit) {
-    const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int xx = x + dx, yy = y + dy;
-        if ((dx || dy) && xx >= 0 && yy >= 0 && xx < N && yy < N) {
-          const int32_t n = ctx.index[std::size_t(yy) * N + xx];
-          if (n >= 0) visit(uint32_t(n));
-        }
-      }
-  };
   std::vector<uint32_t> layer, next;
   for (uint32_t i : members) {
     bool rim = false;
-    for_neighbours(i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
+    for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
     if (rim) {
       depth[i] = 1;
       layer.push_back(i);
@@ -135,7 +133,7 @@ int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, c
   if (layer.empty())
     for (uint32_t i : members) {
       int inside = 0;  // neighbours in the hole
-      for_neighbours(i, [&](uint32_t n) { inside += label[n] == id; });
+      for_each_neighbour(ctx, i, [&](uint32_t n) { inside += label[n] == id; });
       if (inside < 8) {
         depth[i] = 1;
         layer.push_back(i);
@@ -146,7 +144,7 @@ int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, c
   while (!layer.empty() && d <= limit && reached < members.size()) {
     next.clear();
     for (uint32_t i : layer)
-      for_neighbours(i, [&](uint32_t n) {
+      for_each_neighbour(ctx, i, [&](uint32_t n) {
         if (label[n] != id || depth[n] >= 0) return;
         depth[n] = d + 1;
         next.push_back(n);
@@ -313,16 +311,10 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
 template <class F>
 static void for_each_chart_neighbour(const RasterContext& ctx, uint32_t i, F&& f) {
   const TexelMap& tm = ctx.atlas.texels;
-  const int N = ctx.N;
   const int chart = ctx.atlas.chart_of_triangle[tm.triangle[i]];
-  const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
-  for (int dy = -1; dy <= 1; ++dy)
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int xx = x + dx, yy = y + dy;
-      if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
-      const int32_t n = ctx.index[std::size_t(yy) * N + xx];
-      if (n >= 0 && ctx.atlas.chart_of_triangle[tm.triangle[n]] == chart) f(n);
-    }
+  for_each_neighbour(ctx, i, [&](uint32_t n) {
+    if (ctx.atlas.chart_of_triangle[tm.triangle[n]] == chart) f(int32_t(n));
+  });
 }
 
 static void mark_extrapolated(RasterContext& ctx, uint32_t i) {
