@@ -115,45 +115,40 @@ bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::v
 // their other neighbours, ... A hole no covered texel touches (an island of
 // its chart's texels that the atlas image cut off from the rest) is measured
 // from its own edge instead. Counts no further than `limit` (returns
-// limit + 1 for a deeper hole). `depth` is scratch, one entry per chart
-// texel, -1 where unused; it is left that way.
-int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, const std::vector<int32_t>& label,
-               int32_t id, std::vector<int32_t>& depth, int limit) {
-  const TexelMap& tm = ctx.atlas.texels;
-  if (depth.size() != tm.size()) depth.assign(tm.size(), -1);
+// limit + 1 for a deeper hole). The walk marks the members it reached in
+// `label` (-3 - id) and gives them back `id` before it returns: no scratch
+// array the size of the atlas (105 MB at 6144^2).
+int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, std::vector<int32_t>& label,
+               int32_t id, int limit) {
+  const int32_t reached_mark = -3 - id;
   std::vector<uint32_t> layer, next;
   for (uint32_t i : members) {
     bool rim = false;
     for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
-    if (rim) {
-      depth[i] = 1;
-      layer.push_back(i);
-    }
+    if (rim) layer.push_back(i);
   }
   if (layer.empty())
     for (uint32_t i : members) {
       int inside = 0;  // neighbours in the hole
       for_each_neighbour(ctx, i, [&](uint32_t n) { inside += label[n] == id; });
-      if (inside < 8) {
-        depth[i] = 1;
-        layer.push_back(i);
-      }
+      if (inside < 8) layer.push_back(i);
     }
+  for (uint32_t i : layer) label[i] = reached_mark;
   int d = 1;
   std::size_t reached = layer.size();
   while (!layer.empty() && d <= limit && reached < members.size()) {
     next.clear();
     for (uint32_t i : layer)
       for_each_neighbour(ctx, i, [&](uint32_t n) {
-        if (label[n] != id || depth[n] >= 0) return;
-        depth[n] = d + 1;
+        if (label[n] != id) return;  // not in the hole, or reached
+        label[n] = reached_mark;
         next.push_back(n);
       });
     reached += next.size();
     layer.swap(next);
     ++d;
   }
-  for (uint32_t i : members) depth[i] = -1;
+  for (uint32_t i : members) label[i] = id;
   return reached == members.size() ? d : limit + 1;
 }
 
@@ -178,7 +173,6 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
     for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
   std::vector<uint8_t>& closed_texel = ctx.closed;
   closed_texel.assign(max_rest_depth > 0 ? tm.size() : 0, 0);
-  std::vector<int32_t> depth;  // per chart texel: layer inside its hole (hole_depth's scratch)
   // A fluid triangle where a seed failed (no patch, or a newborn that does
   // not keep its own centre) is not seeded again: its texels go to
   // propagate_keys.
@@ -238,7 +232,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       // a few frames: where only patches at rest hold its rim, the strip is
       // continued by them up to rest_hole x r (RasterOptions::rest_hole).
       if (max_rest_depth > 0 && members.size() < chart_texels[chart]) {
-        const int d = hole_depth(ctx, members, label, holes - 1, depth, max_rest_depth);
+        const int d = hole_depth(ctx, members, label, holes - 1, max_rest_depth);
         if (d <= max_closed_depth ||
             (d <= max_rest_depth && rim_at_rest(ctx, patches, members, label, holes - 1))) {
           for (uint32_t i : members) closed_texel[i] = 1;
