@@ -168,11 +168,15 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   };
   const int max_closed_depth = half_width(ctx.options.small_hole);
   const int max_rest_depth = std::max(max_closed_depth, half_width(ctx.options.rest_hole));
+  // A render (no maker) closes whatever its neighbours reach, wherever the
+  // tracking's decisions left it open (fill_or_close_holes), and marks no
+  // held cell: it has no hole to measure.
+  const bool measure = make_patch && max_rest_depth > 0;
   std::vector<uint32_t> chart_texels(std::size_t(std::max(ctx.atlas.chart_count, 0)), 0);
-  if (max_rest_depth > 0)
+  if (measure)
     for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
   std::vector<uint8_t>& closed_texel = ctx.closed;
-  closed_texel.assign(max_rest_depth > 0 ? tm.size() : 0, 0);
+  closed_texel.assign(measure ? tm.size() : 0, 0);
   // A fluid triangle where a seed failed (no patch, or a newborn that does
   // not keep its own centre) is not seeded again: its texels go to
   // propagate_keys.
@@ -231,10 +235,13 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       // strip at its rim a texel or so a frame, which outgrows small_hole in
       // a few frames: where only patches at rest hold its rim, the strip is
       // continued by them up to rest_hole x r (RasterOptions::rest_hole).
-      if (max_rest_depth > 0 && members.size() < chart_texels[chart]) {
-        const int d = hole_depth(ctx, members, label, holes - 1, max_rest_depth);
-        if (d <= max_closed_depth ||
-            (d <= max_rest_depth && rim_at_rest(ctx, patches, members, label, holes - 1))) {
+      // The deeper walk only for a rim at rest: most holes are next to moving
+      // patches, and a walk to rest_hole's depth costs up to 8x more layers.
+      if (measure && members.size() < chart_texels[chart]) {
+        bool close = hole_depth(ctx, members, label, holes - 1, max_closed_depth) <= max_closed_depth;
+        if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, members, label, holes - 1))
+          close = hole_depth(ctx, members, label, holes - 1, max_rest_depth) <= max_rest_depth;
+        if (close) {
           for (uint32_t i : members) closed_texel[i] = 1;
           closed += members.size();
           continue;
