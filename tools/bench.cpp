@@ -12,18 +12,24 @@
 //   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
 #include <fmt/format.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+#include <optional>
+#include <thread>
 #include <vector>
 
+#include <malloc.h>
 #include <unistd.h>
 
 #include "bench.hpp"
 #include "lapflow/addons/demo_scene.hpp"
 #include "lapflow/io/mesh_io.hpp"
+#include "lapflow/core/large_blocks.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/core/stopwatch.hpp"
@@ -131,6 +137,50 @@ double current_rss_mb() {
   return double(resident) * double(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
 }
 
+/// The memory after a frame: what the allocators have in use (live data:
+/// malloc's blocks and the large blocks, LargeBlocks) and what they hold
+/// from the system (in use plus freed memory kept for reuse). RSS follows the
+/// second; when it grows while the first does not, the growth is freed
+/// memory kept, not data.
+struct HeapUse {
+  double in_use_mb = 0, held_mb = 0;
+};
+HeapUse heap_use() {
+  const struct mallinfo2 m = mallinfo2();
+  const LargeBlocks::Stats large = LargeBlocks::instance().stats();
+  constexpr double mb = 1024.0 * 1024.0;
+  return {double(m.uordblks + m.hblkhd + large.live_bytes) / mb,
+          double(m.arena + m.hblkhd + large.live_bytes + large.kept_bytes) / mb};
+}
+
+/// The most memory in use within each frame: a thread samples heap_use()
+/// every 5 ms and keeps the maximum until take() hands it over. mallinfo2
+/// walks malloc's free lists under its lock, which slows the bake: only with
+/// LAPFLOW_BENCH_HEAP_PEAK=1, for where memory goes, not for timings.
+class HeapPeakSampler {
+ public:
+  HeapPeakSampler()
+      : thread_([this] {
+          while (!stop_.load()) {
+            const double now = heap_use().in_use_mb;
+            double seen = peak_.load();
+            while (now > seen && !peak_.compare_exchange_weak(seen, now)) {
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+          }
+        }) {}
+  ~HeapPeakSampler() {
+    stop_ = true;
+    thread_.join();
+  }
+  double take() { return peak_.exchange(heap_use().in_use_mb); }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::atomic<double> peak_{0};
+  std::thread thread_;
+};
+
 /// Issue 15's benchmark on real data: the shared splash (64k-80k triangles,
 /// droplets, many charts) with the foam exemplar at r = 0.028 (about 5k
 /// patches on frame 1). "Per frame" is the wall time between two frames'
@@ -153,19 +203,23 @@ int bake_splash(const std::string& data, int resolution) {
   resolve_bake_options(o);
   fmt::print("splash 1-48, foam, r = 0.028, {}^2, {} threads\n\n", resolution, thread_count());
   fmt::print("| frame | triangles | charts | patches | advect s | weights s | atlas s (ahead) | track s | draw s | holes s | "
-             "resolve s | dilate s | write s | wall s | RSS MiB |\n");
-  fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+             "resolve s | dilate s | write s | wall s | RSS MiB | heap peak MiB | heap in use MiB | heap held MiB |\n");
+  fmt::print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   Stopwatch clock;
   std::vector<double> wall, rss;
+  std::optional<HeapPeakSampler> heap_peak;
+  if (std::getenv("LAPFLOW_BENCH_HEAP_PEAK")) heap_peak.emplace();
   bake(o, [&](const FrameStats& s) {
     wall.push_back(clock.lap());
     rss.push_back(current_rss_mb());
+    const HeapUse heap = heap_use();
+    const std::string frame_peak = heap_peak ? fmt::format("{:.0f}", heap_peak->take()) : "-";
     fmt::print("| {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | "
-               "{:.0f} |\n",
+               "{:.0f} | {} | {:.0f} | {:.0f} |\n",
                s.frame, s.triangles, s.charts, s.patches_alive, s.seconds_advect, s.seconds_weights, s.seconds_atlas,
                s.seconds_track, s.seconds_draw, s.seconds_holes, s.seconds_resolve, s.seconds_dilate, s.seconds_write,
-               wall.back(), rss.back());
+               wall.back(), rss.back(), frame_peak, heap.in_use_mb, heap.held_mb);
     std::fflush(stdout);
   });
   double sum = 0, worst = 0;

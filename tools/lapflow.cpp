@@ -15,7 +15,7 @@
 
 int main(int argc, char** argv) {
   using namespace lapflow;
-  keep_freed_memory_for_reuse();  // frame buffers are reused across frames (pipeline.hpp)
+  keep_freed_memory_for_reuse();  // freed frame buffers are reused (bake.hpp); large ones by large_block_new.cpp
   CLI::App app{
       "lapflow covers an animated liquid surface (a new mesh every frame plus a velocity field) with small\n"
       "deformable texture patches that ride the flow, erodes each patch where it gets too distorted, and\n"

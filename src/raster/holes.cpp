@@ -492,7 +492,10 @@ void fill_or_close_holes(RasterBuffers& r, PatchSet& patches, int frame, const P
   // test. It marks nothing in Patch::held, so the held region cannot creep.
   if (options.fill_holes) st.held_texels = close_held_texels(ctx, patches);
   ctx.newborn_from = patches.patches.size();
-  if (options.fill_holes)
+  // A render has no birth to make and no hole to measure: it closes whatever
+  // the tracking's decisions left open (below), and skips the hole labelling
+  // (an int per chart texel, 150 MB at 6144^2) altogether.
+  if (options.fill_holes && make_patch)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {
     // The AOV winners (largest weight, ties to the oldest): a second raster
