@@ -114,43 +114,61 @@ bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::v
 // inside its rim: 1 for texels next to a covered texel of their chart, 2 for
 // their other neighbours, ... A hole no covered texel touches (an island of
 // its chart's texels that the atlas image cut off from the rest) is measured
-// from its own edge instead. Counts no further than `limit` (returns
-// limit + 1 for a deeper hole). The walk marks the members it reached in
-// `label` (-3 - id) and gives them back `id` before it returns: no scratch
-// array the size of the atlas (105 MB at 6144^2).
-int hole_depth(const RasterContext& ctx, const std::vector<uint32_t>& members, std::vector<int32_t>& label,
-               int32_t id, int limit) {
-  const int32_t reached_mark = -3 - id;
-  std::vector<uint32_t> layer, next;
-  for (uint32_t i : members) {
-    bool rim = false;
-    for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
-    if (rim) layer.push_back(i);
-  }
-  if (layer.empty())
+// from its own edge instead. The walk goes layer by layer and can be
+// continued to a larger limit (a rim at rest may close a deeper hole). It
+// marks the members it reached in `label` (-3 - id) and gives them back `id`
+// when it ends: no scratch array the size of the atlas (105 MB at 6144^2).
+class HoleDepth {
+ public:
+  HoleDepth(const RasterContext& ctx, const std::vector<uint32_t>& members, std::vector<int32_t>& label, int32_t id)
+      : ctx_(ctx), members_(members), label_(label), id_(id), reached_mark_(-3 - id) {
     for (uint32_t i : members) {
-      int inside = 0;  // neighbours in the hole
-      for_each_neighbour(ctx, i, [&](uint32_t n) { inside += label[n] == id; });
-      if (inside < 8) layer.push_back(i);
+      bool rim = false;
+      for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
+      if (rim) layer_.push_back(i);
     }
-  for (uint32_t i : layer) label[i] = reached_mark;
-  int d = 1;
-  std::size_t reached = layer.size();
-  while (!layer.empty() && d <= limit && reached < members.size()) {
-    next.clear();
-    for (uint32_t i : layer)
-      for_each_neighbour(ctx, i, [&](uint32_t n) {
-        if (label[n] != id) return;  // not in the hole, or reached
-        label[n] = reached_mark;
-        next.push_back(n);
-      });
-    reached += next.size();
-    layer.swap(next);
-    ++d;
+    if (layer_.empty())
+      for (uint32_t i : members) {
+        int inside = 0;  // neighbours in the hole
+        for_each_neighbour(ctx, i, [&](uint32_t n) { inside += label[n] == id; });
+        if (inside < 8) layer_.push_back(i);
+      }
+    for (uint32_t i : layer_) label[i] = reached_mark_;
+    reached_ = layer_.size();
   }
-  for (uint32_t i : members) label[i] = id;
-  return reached == members.size() ? d : limit + 1;
-}
+  ~HoleDepth() {
+    for (uint32_t i : members_) label_[i] = id_;
+  }
+  HoleDepth(const HoleDepth&) = delete;
+  HoleDepth& operator=(const HoleDepth&) = delete;
+
+  // The hole's depth when it is at most `limit`, else limit + 1; a later
+  // call with a larger limit continues from the layer this one stopped at.
+  int within(int limit) {
+    while (!layer_.empty() && depth_ <= limit && reached_ < members_.size()) {
+      next_.clear();
+      for (uint32_t i : layer_)
+        for_each_neighbour(ctx_, i, [&](uint32_t n) {
+          if (label_[n] != id_) return;  // not in the hole, or reached
+          label_[n] = reached_mark_;
+          next_.push_back(n);
+        });
+      reached_ += next_.size();
+      layer_.swap(next_);
+      ++depth_;
+    }
+    return reached_ == members_.size() ? depth_ : limit + 1;
+  }
+
+ private:
+  const RasterContext& ctx_;
+  const std::vector<uint32_t>& members_;
+  std::vector<int32_t>& label_;
+  const int32_t id_, reached_mark_;
+  std::vector<uint32_t> layer_, next_;
+  std::size_t reached_ = 0;
+  int depth_ = 1;
+};
 
 }  // namespace
 
@@ -238,9 +256,13 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       // The deeper walk only for a rim at rest: most holes are next to moving
       // patches, and a walk to rest_hole's depth costs up to 8x more layers.
       if (measure && members.size() < chart_texels[chart]) {
-        bool close = hole_depth(ctx, members, label, holes - 1, max_closed_depth) <= max_closed_depth;
-        if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, members, label, holes - 1))
-          close = hole_depth(ctx, members, label, holes - 1, max_rest_depth) <= max_rest_depth;
+        bool close;
+        {
+          HoleDepth depth(ctx, members, label, holes - 1);
+          close = depth.within(max_closed_depth) <= max_closed_depth;
+          if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, members, label, holes - 1))
+            close = depth.within(max_rest_depth) <= max_rest_depth;
+        }
         if (close) {
           for (uint32_t i : members) closed_texel[i] = 1;
           closed += members.size();
@@ -385,7 +407,7 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
   return closed;
 }
 
-std::size_t propagate_keys(RasterContext& ctx) {
+std::size_t propagate_keys(RasterContext& ctx, std::vector<uint32_t>* left) {
   std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
   std::size_t filled = 0;
   std::vector<uint64_t> next(open.size());
@@ -411,15 +433,15 @@ std::size_t propagate_keys(RasterContext& ctx) {
       }
     }
     filled += changed;
-    if (changed == 0) break;  // charts no patch reaches at all
     open.swap(still);
+    if (changed == 0) break;  // charts no patch reaches at all
   }
+  if (left) *left = std::move(open);
   return filled;
 }
 
-std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches) {
+std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& open) {
   const TexelMap& tm = ctx.atlas.texels;
-  const std::vector<uint32_t> open = uncovered_texels(ctx, [](std::size_t) { return true; });
   if (open.empty() || patches.patches.empty()) return 0;
   // Bounding boxes of the patches: most are skipped on one box distance.
   const std::size_t np = patches.patches.size();
@@ -516,8 +538,9 @@ void fill_or_close_holes(RasterBuffers& r, PatchSet& patches, int frame, const P
     // The small holes left to their neighbours are closed here too (an
     // island of a chart's texels that no covered texel touches, by the
     // nearest patch in 3D); whatever else is filled is forced.
-    const std::size_t propagated = propagate_keys(ctx);
-    const std::size_t nearest = cover_from_nearest_patch(ctx, patches);
+    std::vector<uint32_t> left;
+    const std::size_t propagated = propagate_keys(ctx, &left);
+    const std::size_t nearest = cover_from_nearest_patch(ctx, patches, left);
     // A render (no maker) has no birth to wait for: whatever its neighbours
     // close is closed, wherever the tracking's decisions left it open.
     if (!make_patch) closed = propagated;

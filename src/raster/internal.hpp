@@ -160,12 +160,13 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texe
 /// get no patch: they are left open for propagate_keys, and `closed` counts
 /// their texels. Without `make_patch` (a render of a tracked state) only the
 /// small holes are found and counted: nothing is born and `patches` is not
-/// changed.
+/// changed (fill_holes no longer calls it for a render).
 std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
                                 std::size_t max_patches, std::size_t& closed);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same
-/// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled.
-std::size_t propagate_keys(RasterContext& ctx);
+/// chart, repeatedly (Jacobi sweeps: deterministic). Returns texels so filled;
+/// the texels it could not reach (in texel order) go to `left` when given.
+std::size_t propagate_keys(RasterContext& ctx, std::vector<uint32_t>* left = nullptr);
 
 /// Before hole filling (RasterOptions::hold): hole texels up to two layers
 /// (any depth for a patch at rest, Patch::at_rest)
@@ -177,8 +178,9 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches);
 /// in their chart (a tiny chart whose newborn failed): each takes the key of
 /// the patch triangle nearest to its surface point in 3D (ties: lowest key)
 /// among those whose map extends to it; the resolve extrapolates that map.
+/// `open`: the open chart texels in texel order (propagate_keys's `left`).
 /// Returns texels so filled.
-std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches);
+std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& open);
 
 /// Fills texels outside charts from the nearest chart texel: `gutter`
 /// 8-neighbour dilation passes, then a row-nearest and a row-copy fill.
