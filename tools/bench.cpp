@@ -229,6 +229,9 @@ int bake_splash(const std::string& data, int resolution) {
              "RSS at frame 5 {:.0f} MiB, at frame 48 {:.0f} MiB\n",
              mean, worst, wall.empty() ? 0.0 : wall[0], peak_rss_mb(), rss.size() > 4 ? rss[4] : 0.0,
              rss.empty() ? 0.0 : rss.back());
+  const LargeBlocks::Stats large = LargeBlocks::instance().stats();
+  fmt::print("large blocks (8 MiB and more): at most {:.0f} MiB alive at once, {:.0f} MiB mapped fresh over the bake\n",
+             double(large.peak_live_bytes) / (1024.0 * 1024.0), double(large.fresh_bytes) / (1024.0 * 1024.0));
   return 0;
 }
 

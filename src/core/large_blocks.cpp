@@ -11,6 +11,22 @@ namespace {
 
 std::size_t round_up(std::size_t bytes, std::size_t granule) { return (bytes + granule - 1) / granule * granule; }
 
+// A fresh mapping of `bytes` (a multiple of the granule) starting on a
+// granule boundary: blocks and the pieces split off them then stay on 2 MiB
+// boundaries, so that the kernel can back them with transparent huge pages
+// and mremap moves whole page-table levels instead of splitting huge pages.
+char* map_aligned(std::size_t bytes) {
+  const std::size_t g = LargeBlocks::kGranule;
+  void* raw = ::mmap(nullptr, bytes + g, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (raw == MAP_FAILED) return nullptr;
+  char* const start = static_cast<char*>(raw);
+  char* const aligned = reinterpret_cast<char*>(round_up(reinterpret_cast<std::uintptr_t>(start), g));
+  if (aligned > start) ::munmap(start, std::size_t(aligned - start));
+  char* const end = start + bytes + g;
+  if (end > aligned + bytes) ::munmap(aligned + bytes, std::size_t(end - (aligned + bytes)));
+  return aligned;
+}
+
 }  // namespace
 
 LargeBlocks& LargeBlocks::instance() {
@@ -36,16 +52,17 @@ void LargeBlocks::note_range(const char* base, std::size_t size) {
   }
 }
 
-// Moves the `bytes` at `from` to `to` (pages and all, no copy). A range that
-// spans several kernel mappings (a block assembled from pieces) moves one
-// granule at a time: pieces always join at granule offsets.
-static bool move_pages(char* from, char* to, std::size_t bytes) {
-  if (::mremap(from, bytes, bytes, MREMAP_MAYMOVE | MREMAP_FIXED, to) != MAP_FAILED) return true;
-  for (std::size_t off = 0; off < bytes; off += LargeBlocks::kGranule)
-    if (::mremap(from + off, LargeBlocks::kGranule, LargeBlocks::kGranule, MREMAP_MAYMOVE | MREMAP_FIXED, to + off) ==
-        MAP_FAILED)
-      return false;
-  return true;
+// Moves the `bytes` at `from` to `to` (pages and all, no copy) and returns
+// how many moved. A range that spans several kernel mappings (a block
+// assembled from pieces) moves one granule at a time: pieces always join at
+// granule offsets. Stops at the first granule the kernel refuses.
+static std::size_t move_pages(char* from, char* to, std::size_t bytes) {
+  if (::mremap(from, bytes, bytes, MREMAP_MAYMOVE | MREMAP_FIXED, to) != MAP_FAILED) return bytes;
+  std::size_t moved = 0;
+  while (moved < bytes && ::mremap(from + moved, LargeBlocks::kGranule, LargeBlocks::kGranule,
+                                   MREMAP_MAYMOVE | MREMAP_FIXED, to + moved) != MAP_FAILED)
+    moved += LargeBlocks::kGranule;
+  return moved;
 }
 
 void* LargeBlocks::allocate(std::size_t bytes) {
@@ -77,9 +94,9 @@ void* LargeBlocks::allocate(std::size_t bytes) {
     // move, largest first, with their pages; only what they do not cover is
     // fresh memory. Pages are interchangeable, so the cache never maps more
     // than the most bytes ever alive at once.
-    void* range = ::mmap(nullptr, need, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (range == MAP_FAILED) return nullptr;
-    block = {static_cast<char*>(range), need};
+    char* range = map_aligned(need);
+    if (!range) return nullptr;
+    block = {range, need};
     std::size_t covered = 0;
     while (covered < need && kept_count_ > 0) {
       int largest = 0;
@@ -87,14 +104,15 @@ void* LargeBlocks::allocate(std::size_t bytes) {
         if (kept_[i].size > kept_[largest].size) largest = i;
       Block& piece = kept_[largest];
       const std::size_t take = std::min(piece.size, need - covered);
-      if (!move_pages(piece.base, block.base + covered, take)) break;
-      covered += take;
-      if (take == piece.size) {
+      const std::size_t moved = move_pages(piece.base, block.base + covered, take);
+      covered += moved;
+      if (moved == piece.size) {
         remove_kept(largest);
       } else {
-        piece.base += take, piece.size -= take;
-        stats_.kept_bytes -= take;
+        piece.base += moved, piece.size -= moved;
+        stats_.kept_bytes -= moved;
       }
+      if (moved < take) break;  // the rest of the range stays fresh
     }
     stats_.fresh_bytes += need - covered;
   }

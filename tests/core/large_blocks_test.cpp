@@ -19,7 +19,7 @@ TEST(LargeBlocks, AFreedBlockServesTheNextRequestThatFits) {
   LargeBlocks cache;
   void* a = cache.allocate(20 * MiB);
   ASSERT_NE(a, nullptr);
-  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(a) % LargeBlocks::kAlignment, 0u);
+  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(a) % LargeBlocks::kGranule, 0u);  // huge-page boundaries
   std::memset(a, 1, 20 * MiB);
   EXPECT_TRUE(cache.release(a));
   EXPECT_EQ(cache.stats().kept_bytes, 20 * MiB);

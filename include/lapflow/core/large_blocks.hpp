@@ -29,7 +29,7 @@ class LargeBlocks {
  public:
   /// Requests of at least this many bytes are large blocks.
   static constexpr std::size_t kThreshold = std::size_t(8) << 20;
-  /// Blocks are returned aligned to this (a page).
+  /// Blocks are returned aligned to at least this (a page; in fact to kGranule).
   static constexpr std::size_t kAlignment = 4096;
   /// Mappings are multiples of this.
   static constexpr std::size_t kGranule = std::size_t(2) << 20;
