@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <cmath>
 #include <unordered_map>
+#include <stdexcept>
 #include <unordered_set>
 
 #include "lapflow/core/parallel.hpp"
@@ -94,14 +95,14 @@ void for_each_neighbour(const RasterContext& ctx, uint32_t i, F&& f) {
     }
 }
 
-// Whether every covered texel next to hole `id` (its texels `members`,
-// labelled `id`) is won or closed by a patch at rest.
-bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& members,
-                 const std::vector<int32_t>& label, int32_t id) {
+// Whether every covered texel next to a hole (its rim layer `rim`: the
+// members with a covered neighbour) is won or closed by a patch at rest.
+// The hole's own texels are open (no key), whatever their label.
+bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::vector<uint32_t>& rim) {
   bool any = false, moving = false;
-  for (uint32_t i : members) {
+  for (uint32_t i : rim) {
     for_each_neighbour(ctx, i, [&](uint32_t n) {
-      if (label[n] == id || ctx.keys[n] == kNoKey) return;
+      if (ctx.keys[n] == kNoKey) return;
       if (patches.patches[std::size_t(ctx.keys[n] >> 32)].at_rest) any = true;
       else moving = true;
     });
@@ -127,6 +128,7 @@ class HoleDepth {
       for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
       if (rim) layer_.push_back(i);
     }
+    rim_ = layer_;
     if (layer_.empty())
       for (uint32_t i : members) {
         int inside = 0;  // neighbours in the hole
@@ -141,6 +143,9 @@ class HoleDepth {
   }
   HoleDepth(const HoleDepth&) = delete;
   HoleDepth& operator=(const HoleDepth&) = delete;
+
+  // The members with a covered neighbour (none for an island).
+  const std::vector<uint32_t>& rim() const { return rim_; }
 
   // The hole's depth when it is at most `limit`, else limit + 1; a later
   // call with a larger limit continues from the layer this one stopped at.
@@ -165,7 +170,7 @@ class HoleDepth {
   const std::vector<uint32_t>& members_;
   std::vector<int32_t>& label_;
   const int32_t id_, reached_mark_;
-  std::vector<uint32_t> layer_, next_;
+  std::vector<uint32_t> rim_, layer_, next_;
   std::size_t reached_ = 0;
   int depth_ = 1;
 };
@@ -178,6 +183,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   const int N = ctx.N;
   std::size_t born = 0;
   closed = 0;
+  if (!make_patch) throw std::logic_error("create_hole_patches: no patch maker (a render closes holes instead)");
   // Texel layers a hole may have inside its rim and still be closed by its
   // neighbours: its half-width in texels.
   // A hole held only by patches at rest may be up to rest_hole x r wide.
@@ -186,10 +192,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   };
   const int max_closed_depth = half_width(ctx.options.small_hole);
   const int max_rest_depth = std::max(max_closed_depth, half_width(ctx.options.rest_hole));
-  // A render (no maker) closes whatever its neighbours reach, wherever the
-  // tracking's decisions left it open (fill_or_close_holes), and marks no
-  // held cell: it has no hole to measure.
-  const bool measure = make_patch && max_rest_depth > 0;
+  const bool measure = max_rest_depth > 0;
   std::vector<uint32_t> chart_texels(std::size_t(std::max(ctx.atlas.chart_count, 0)), 0);
   if (measure)
     for (std::size_t i = 0; i < tm.size(); ++i) ++chart_texels[ctx.atlas.chart_of_triangle[tm.triangle[i]]];
@@ -260,7 +263,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
         {
           HoleDepth depth(ctx, members, label, holes - 1);
           close = depth.within(max_closed_depth) <= max_closed_depth;
-          if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, members, label, holes - 1))
+          if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, depth.rim()))
             close = depth.within(max_rest_depth) <= max_rest_depth;
         }
         if (close) {
@@ -269,7 +272,6 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
           continue;
         }
       }
-      if (!make_patch) continue;  // a render: births are the tracking's
       // The member nearest the centroid (ties: lowest texel index), then, for
       // holes wider than one patch, members in texel order 2r apart.
       std::sort(members.begin(), members.end());
@@ -293,7 +295,6 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
       }
     }
     for (uint32_t i : open) label[i] = -1;
-    if (!make_patch) break;
     if (seeds.size() > max_patches - born) seeds.resize(max_patches - born);
 
     // Create in parallel (ids in seed order), append in seed order.

@@ -158,9 +158,8 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int t, int texe
 /// parallel, each drawn into the still-open texels. Returns patches born.
 /// Holes no wider than RasterOptions::small_hole x r (and not a whole chart)
 /// get no patch: they are left open for propagate_keys, and `closed` counts
-/// their texels. Without `make_patch` (a render of a tracked state) only the
-/// small holes are found and counted: nothing is born and `patches` is not
-/// changed (fill_holes no longer calls it for a render).
+/// their texels. `make_patch` must be set: a render of a tracked state has
+/// no birth to make and does not call this (fill_holes).
 std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame, const PatchMaker& make_patch,
                                 std::size_t max_patches, std::size_t& closed);
 /// Gives every open chart texel the key of a covered 8-neighbour in the same
