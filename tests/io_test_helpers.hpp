@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <cstdint>
 #include <cstring>
 #include <cstdlib>
 #include <filesystem>
@@ -145,6 +146,34 @@ inline BakeOptions small_pebbles_bake(const std::string& meshes_dir, const std::
   o.atlas.resolution = 256;
   o.aov = true;
   return o;
+}
+
+/// The compression attribute of an EXR file's header (OpenEXR file layout:
+/// magic, version, then name\0 type\0 int32 size, value... until an empty
+/// name). -1 when absent. 0 none, 1 RLE, 2 ZIPS, 3 ZIP, 4 PIZ, 8 DWAA.
+inline int exr_header_compression(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::size_t at = 8;
+  auto cstring = [&] {
+    std::string out;
+    while (at < bytes.size() && bytes[at] != 0) out += bytes[at++];
+    ++at;
+    return out;
+  };
+  while (at < bytes.size()) {
+    const std::string name = cstring();
+    if (name.empty()) break;
+    const std::string type = cstring();
+    if (at + 4 > bytes.size()) break;
+    int32_t size;
+    std::memcpy(&size, &bytes[at], 4);
+    at += 4;
+    if (name == "compression" && type == "compression" && size == 1 && at < bytes.size())
+      return int(static_cast<unsigned char>(bytes[at]));
+    at += std::size_t(size);
+  }
+  return -1;
 }
 
 }  // namespace lapflow::test

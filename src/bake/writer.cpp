@@ -114,9 +114,15 @@ double FrameWriter::write_files(const Job& w) const {
   });
   if (o.aov)
     jobs.push_back([&] {
-      // Data: float, and never lossy.
-      const ExrCompression lossless =
-          o.exr.compression == ExrCompression::Dwaa ? ExrCompression::Zip : o.exr.compression;
+      // Data: float, and never lossy. RLE finds no runs to shorten in it:
+      // every texel holds a patch's (u, v), the gutters too once dilated
+      // (splash at 6144²: 603.9 MB with RLE, 604.1 MB without). So under
+      // RLE, the default, it is written uncompressed, which spares the
+      // encoding (docs/performance.md, "Stop 26"); ZIP and PIZ do shrink
+      // it (to 49% and 41%), at two to four times the time.
+      ExrCompression lossless = o.exr.compression;
+      if (lossless == ExrCompression::Dwaa) lossless = ExrCompression::Zip;
+      if (lossless == ExrCompression::Rle) lossless = ExrCompression::None;
       write_exr(names_.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
                 {ExrPixelType::Float, lossless}, &staged);
     });

@@ -111,6 +111,34 @@ TEST(Bake, IdenticalForOneAndTwoThreads) {
   }
 }
 
+// The AOV is float data and never lossy. RLE finds no runs in it (every
+// texel holds a patch's (u, v), the gutters too once dilated), so under RLE,
+// the default, it is written uncompressed; ZIP and PIZ are kept, DWAA (lossy)
+// becomes ZIP. Colour and displacement keep the compression asked for.
+TEST(Bake, AovIsLosslessAndUncompressedUnderRle) {
+  const fs::path meshes = demo_sequence("aov_compression_in", 2);
+  const std::pair<ExrCompression, std::pair<int, int>> cases[] = {
+      {ExrCompression::Rle, {1, 0}}, {ExrCompression::Zip, {3, 3}}, {ExrCompression::Piz, {4, 4}},
+      {ExrCompression::Dwaa, {8, 3}}, {ExrCompression::None, {0, 0}}};
+  Image rle_aov;
+  for (const auto& [compression, codes] : cases) {
+    const fs::path out = fresh_dir("aov_compression");
+    BakeOptions o = small_bake(meshes, out);
+    o.aov = true;
+    o.exr.compression = compression;
+    run(o);
+    for (int frame : {1, 2}) {
+      const auto file = [&](const char* kind) { return (out / fmt::format("t.{}.{:04d}.exr", kind, frame)).string(); };
+      EXPECT_EQ(test::exr_header_compression(file("color")), codes.first) << codes.first;
+      EXPECT_EQ(test::exr_header_compression(file("aov")), codes.second) << codes.first;
+    }
+    // Whatever the compression, the AOV holds the same floats.
+    const Image aov = frame_image(out, "aov", 2);
+    if (compression == ExrCompression::Rle) rle_aov = aov;
+    else EXPECT_TRUE(aov.pixels == rle_aov.pixels) << codes.first;
+  }
+}
+
 // The temporal options of docs/temporal.md together (hold, small holes
 // closed by neighbours, merge): coverage stays exactly 1, every retired
 // patch has one cause, and 1 and 2 threads give the same images.

@@ -19,6 +19,7 @@ namespace lapflow {
 namespace {
 namespace fs = std::filesystem;
 using test::TempDir;
+using test::exr_header_compression;
 
 float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
 
@@ -52,33 +53,6 @@ TEST(ImageIo, ExrHalfRoundTripWithinHalfPrecision) {
   }
 }
 
-/// The compression attribute of an EXR file's header (OpenEXR file layout:
-/// magic, version, then name\0 type\0 int32 size, value... until an empty
-/// name). -1 when absent. 0 none, 1 RLE, 2 ZIPS, 3 ZIP, 4 PIZ, 8 DWAA.
-int exr_header_compression(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::size_t at = 8;
-  auto cstring = [&] {
-    std::string out;
-    while (at < bytes.size() && bytes[at] != 0) out += bytes[at++];
-    ++at;
-    return out;
-  };
-  while (at < bytes.size()) {
-    const std::string name = cstring();
-    if (name.empty()) break;
-    const std::string type = cstring();
-    if (at + 4 > bytes.size()) break;
-    int32_t size;
-    std::memcpy(&size, &bytes[at], 4);
-    at += 4;
-    if (name == "compression" && type == "compression" && size == 1 && at < bytes.size())
-      return int(static_cast<unsigned char>(bytes[at]));
-    at += std::size_t(size);
-  }
-  return -1;
-}
 
 TEST(ImageIo, ExrCompressionIsTheOneAskedForAndRleByDefault) {
   // The default (README, --compression) is RLE; each option must reach the file.
