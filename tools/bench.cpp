@@ -10,6 +10,8 @@
 //   lapflow_bench atlas [DATA]    the surface atlas alone
 //   lapflow_bench patches [DATA]  the patch stages alone
 //   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
+//   lapflow_bench replay DIR F [K] frame F of the bake in DIR computed again K times (default 5) from
+//                                 the previous frame's state, each step timed (tools/bench_replay.cpp)
 #include <fmt/format.h>
 
 #include <atomic>
@@ -266,6 +268,15 @@ int main(int argc, char** argv) {
   }
   if (!args.empty() && args[0] == "atlas") {
     bench::bench_atlas(args.size() > 1 ? args[1] : data);
+    return 0;
+  }
+  if (args.size() >= 3 && args[0] == "replay") {
+    try {
+      bench::bench_replay(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "lapflow_bench replay: {}\n", e.what());
+      return 2;
+    }
     return 0;
   }
   if (!args.empty() && args[0] == "obj") {

@@ -31,4 +31,12 @@ void bench_atlas(const std::string& data_dir);
 /// already formatted, so formatting and file writing are told apart.
 void bench_obj(const std::string& data_dir);
 
+/// One frame of a finished bake computed again `repeats` times in one
+/// process (tools/bench_replay.cpp): the tracking from the previous frame's
+/// state (the bake keeps the last two; `lapflow track` keeps all) and the
+/// output from its result, each step timed, nothing else running. Prints a
+/// row per repeat (with a digest of the images and patches, which must not
+/// change), then the minimum and the median of each step.
+void bench_replay(const std::string& bake_dir, int frame, int repeats);
+
 }  // namespace lapflow::bench

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "atlas/internal.hpp"
 #include "lapflow/atlas/atlas.hpp"
@@ -78,46 +80,70 @@ void measure_density(const TriMesh& mesh, const atlas_detail::TriangleInfo& info
 
 }  // namespace
 
-SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& options) {
+namespace {
+
+void check_options(const AtlasOptions& options) {
   if (options.resolution < 1 || options.resolution > 65536)
     throw UsageError("atlas resolution must be between 1 and 65536 texels, got " + std::to_string(options.resolution));
   if (options.gutter < 0) throw UsageError("atlas gutter must be >= 0 texels, got " + std::to_string(options.gutter));
   if (!(options.max_stretch > 1)) throw UsageError("atlas max_stretch must be > 1");
+}
 
-  SurfaceAtlas atlas;
-  atlas.resolution = options.resolution;
+}  // namespace
+
+std::vector<SurfaceAtlas> build_surface_atlases(const TriMesh& mesh, const std::vector<AtlasOptions>& options) {
+  for (const AtlasOptions& o : options) {
+    check_options(o);
+    if (o.max_stretch != options.front().max_stretch)
+      throw UsageError("atlases built together share one max_stretch (one flattening)");
+  }
+  std::vector<SurfaceAtlas> atlases(options.size());
+  if (options.empty()) return atlases;
   Clock::time_point clock = Clock::now();
 
+  // Charts and LSCM do not depend on the resolution or the gutter: done
+  // once, timed into the first atlas's report.
   const atlas_detail::TriangleInfo info = atlas_detail::analyze_triangles(mesh);
   atlas_detail::Charts charts = atlas_detail::segment_charts(mesh, info, atlas_detail::ChartOptions{});
-  atlas.report.seconds_charts = seconds_since(clock);
+  atlases.front().report.seconds_charts = seconds_since(clock);
 
   double total_area = 0;
   for (double a : info.area) total_area += a;
   const double max_chart_area = total_area / kMinChartsForPacking;
   const double max_chart_length = kMaxChartLength * std::sqrt(total_area);
-  atlas.corner_uv = atlas_detail::flatten_charts(mesh, info, charts, options.max_stretch, max_chart_area, max_chart_length);
-  atlas.report.seconds_lscm = seconds_since(clock);
+  const std::vector<Vec2> local =
+      atlas_detail::flatten_charts(mesh, info, charts, options.front().max_stretch, max_chart_area, max_chart_length);
+  atlases.front().report.seconds_lscm = seconds_since(clock);
 
-  const atlas_detail::PackResult packed =
-      atlas_detail::pack_charts(charts, options.resolution, options.gutter, atlas.corner_uv);
-  atlas.report.texels_per_metre = packed.texels_per_metre;
-  atlas.report.packing_overflow = packed.overflow;
-  atlas.report.seconds_pack = seconds_since(clock);
+  for (std::size_t k = 0; k < options.size(); ++k) {
+    const AtlasOptions& o = options[k];
+    SurfaceAtlas& atlas = atlases[k];
+    atlas.resolution = o.resolution;
+    atlas.corner_uv = local;
+    const atlas_detail::PackResult packed = atlas_detail::pack_charts(charts, o.resolution, o.gutter, atlas.corner_uv);
+    atlas.report.texels_per_metre = packed.texels_per_metre;
+    atlas.report.packing_overflow = packed.overflow;
+    atlas.report.seconds_pack = seconds_since(clock);
 
-  atlas.texels = atlas_detail::build_texel_map(atlas.corner_uv, options.resolution);
-  atlas.report.seconds_texels = seconds_since(clock);
+    atlas.texels = atlas_detail::build_texel_map(atlas.corner_uv, o.resolution);
+    atlas.report.seconds_texels = seconds_since(clock);
 
-  atlas.chart_of_triangle = std::move(charts.chart_of_triangle);
-  atlas.chart_count = charts.count;
-  atlas.report.charts = charts.count;
-  const double texels = double(options.resolution) * options.resolution;
-  atlas.report.utilization = double(atlas.texels.size()) / texels;
-  const double claimed = double(std::max(packed.claimed_texels, atlas.texels.size()));
-  atlas.report.lost_to_gutters = (claimed - double(atlas.texels.size())) / texels;
-  atlas.report.lost_to_packing = 1 - claimed / texels;
-  measure_density(mesh, info, atlas.corner_uv, atlas.report);
-  return atlas;
+    atlas.chart_of_triangle = charts.chart_of_triangle;
+    atlas.chart_count = charts.count;
+    atlas.report.charts = charts.count;
+    const double texels = double(o.resolution) * o.resolution;
+    atlas.report.utilization = double(atlas.texels.size()) / texels;
+    const double claimed = double(std::max(packed.claimed_texels, atlas.texels.size()));
+    atlas.report.lost_to_gutters = (claimed - double(atlas.texels.size())) / texels;
+    atlas.report.lost_to_packing = 1 - claimed / texels;
+    measure_density(mesh, info, atlas.corner_uv, atlas.report);
+    seconds_since(clock);  // the density figures are not a stage of the report
+  }
+  return atlases;
+}
+
+SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& options) {
+  return std::move(build_surface_atlases(mesh, {options}).front());
 }
 
 }  // namespace lapflow

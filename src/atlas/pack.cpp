@@ -826,10 +826,25 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
       const double eps = -1e-9 * area2;
       const int x0 = std::max(0, int(std::ceil(std::min({a.x, b.x, c.x}) - 0.5)));
       const int x1 = std::min(n - 1, int(std::floor(std::max({a.x, b.x, c.x}) - 0.5)));
+      const Vec2 corner[3] = {a, b, c};
       for (int y = std::max(row0, top[t]); y <= std::min(row1 - 1, bottom[t]); ++y) {
         const double py = (n - 1 - y) + 0.5;
         int32_t* row = owner.data() + std::size_t(y - row0) * n;
-        for (int x = x0; x <= x1; ++x) {
+        // Only the pixels near the triangle's span on this row are tested
+        // (the exact test below decides): the span of the edges' crossings
+        // of the row, a pixel wider on each side against round-off.
+        double lo = INFINITY, hi = -INFINITY;
+        for (int k = 0; k < 3; ++k) {
+          const Vec2 &p0 = corner[k], &p1 = corner[(k + 1) % 3];
+          if ((p0.y - py) * (p1.y - py) > 0) continue;  // the edge does not reach the row
+          const double x = p0.y == p1.y ? p0.x : p0.x + (p1.x - p0.x) * ((py - p0.y) / (p1.y - p0.y));
+          const double x_other = p0.y == p1.y ? p1.x : x;
+          lo = std::min({lo, x, x_other}), hi = std::max({hi, x, x_other});
+        }
+        if (!(lo <= hi)) lo = std::min({a.x, b.x, c.x}), hi = std::max({a.x, b.x, c.x});
+        const int sx0 = std::max(x0, int(std::floor(lo - 0.5)) - 1);
+        const int sx1 = std::min(x1, int(std::ceil(hi - 0.5)) + 1);
+        for (int x = sx0; x <= sx1; ++x) {
           if (row[x] != INT32_MAX) continue;
           const Vec2 p{x + 0.5, py};
           if (cross(c - b, p - b) >= eps && cross(a - c, p - c) >= eps && cross(b - a, p - a) >= eps) row[x] = t;
@@ -867,21 +882,33 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
       std::vector<int32_t> owner = std::move(owners[k]);
       const int row0 = int(k) * kBand;
       std::size_t out = count[k];
-      for (std::size_t i = 0; i < owner.size(); ++i) {
-        const int32_t t = owner[i];
-        if (t == INT32_MAX) continue;
-        const std::size_t x = i % n, y = row0 + i / n;
-        const Vec2 a = corner_uv[3 * std::size_t(t)] * n, bb = corner_uv[3 * std::size_t(t) + 1] * n,
-                   c = corner_uv[3 * std::size_t(t) + 2] * n;
-        const Vec2 p{x + 0.5, double(n - 1 - y) + 0.5};
-        const double area2 = cross(bb - a, c - a);
-        const double w1 = std::clamp(cross(a - c, p - c) / area2, 0.0, 1.0);
-        const double w2 = std::clamp(cross(bb - a, p - a) / area2, 0.0, 1.0 - w1);
-        map.texel[out] = uint32_t(y * n + x);
-        map.triangle[out] = t;
-        map.b1[out] = float(w1);
-        map.b2[out] = float(w2);
-        ++out;
+      // Row by row (no division per texel); a run of texels of one triangle
+      // reuses its corners.
+      int32_t last = -1;
+      Vec2 a, bb, c;
+      double area2 = 0;
+      const std::size_t rows = owner.size() / std::size_t(n);
+      for (std::size_t r = 0; r < rows; ++r) {
+        const std::size_t y = std::size_t(row0) + r;
+        const int32_t* row = owner.data() + r * std::size_t(n);
+        for (std::size_t x = 0; x < std::size_t(n); ++x) {
+          const int32_t t = row[x];
+          if (t == INT32_MAX) continue;
+          if (t != last) {
+            a = corner_uv[3 * std::size_t(t)] * n, bb = corner_uv[3 * std::size_t(t) + 1] * n,
+            c = corner_uv[3 * std::size_t(t) + 2] * n;
+            area2 = cross(bb - a, c - a);
+            last = t;
+          }
+          const Vec2 p{x + 0.5, double(n - 1 - y) + 0.5};
+          const double w1 = std::clamp(cross(a - c, p - c) / area2, 0.0, 1.0);
+          const double w2 = std::clamp(cross(bb - a, p - a) / area2, 0.0, 1.0 - w1);
+          map.texel[out] = uint32_t(y * n + x);
+          map.triangle[out] = t;
+          map.b1[out] = float(w1);
+          map.b2[out] = float(w2);
+          ++out;
+        }
       }
     }
   }, 1);

@@ -276,6 +276,75 @@ void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& e
   st.seconds_raster = st.seconds_track + st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
 }
 
+void build_frame_atlases(Frame& frame, const BakeOptions& o) {
+  // The tracking atlas (the patches' decisions), then the output's.
+  AtlasOptions tracking = o.atlas;
+  tracking.resolution = tracking_resolution(surface_area(frame.mesh), o.patch.radius, o.track_texel);
+  tracking.gutter = kTrackingGutter;
+  if (o.track_only) {
+    frame.tracking_atlas = build_surface_atlas(frame.mesh, tracking);
+    return;
+  }
+  // One segmentation and flattening for both.
+  std::vector<SurfaceAtlas> both = build_surface_atlases(frame.mesh, {tracking, o.atlas});
+  frame.tracking_atlas = std::move(both[0]);
+  frame.atlas = std::move(both[1]);
+}
+
+RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const RasterExemplar& textures,
+                        const BakeOptions& o) {
+  FrameStats& st = cur.stats;
+  Stopwatch clock;
+  if (prev && !patches.patches.empty()) {
+    // Step 4: the patches follow the flow onto this frame's surface.
+    AdvectOptions advect = o.advect;
+    advect.dt = double(cur.number - prev->number) / o.fps;
+    const AdvectStats a = advect_patches(*cur.surface, prev->velocity, cur.velocity, o.patch, advect, patches);
+    st.patches_lost = a.patches_removed;
+    st.patch_vertices_removed = a.vertices_removed;
+    st.seconds_advect = clock.lap();
+    // Step 5.
+    update_weights(cur.mesh, o.patch.radius, o.weights, patches);
+    st.seconds_weights = clock.lap();
+  }
+  // New patches (seeding, hole filling) see this frame's flow.
+  PatchOptions born = o.patch;
+  born.velocity = &cur.velocity;
+  born.previous_velocity = prev ? &prev->velocity : nullptr;
+  born.dt = 1.0 / o.fps;
+  if (patches.patches.empty() && !cur.mesh.empty()) {
+    // Steps 1-3 on the first frame, and after the liquid vanished.
+    seed_patches(*cur.surface, cur.number, born, o.seeding, o.weights, patches);
+    st.patches_born += patches.patches.size();
+    st.seconds_seed = clock.lap();
+  }
+
+  // Steps 7-9 at the tracking resolution (docs/farm.md): lapped
+  // rasterization, the oldest non-eroded patch per texel; new patches at
+  // the holes' centres; the texels each patch won; retirement. Patches
+  // and their held cells then carry over to the next frame. Only what
+  // carries over is decided here: no image.
+  RasterOptions tracking = o.raster;
+  tracking.aov = false;
+  tracking.images = false;
+  tracking.dilate = false;
+  Stopwatch step;
+  const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
+  RasterBuffers t = begin_raster(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights, locate);
+  st.tracking.seconds_setup = step.lap();
+  draw_patches(t, patches);
+  st.tracking.seconds_draw = step.lap();
+  const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
+  fill_holes(t, patches, cur.number, surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number));
+  st.tracking.seconds_holes = step.lap();
+  resolve_texels(t, patches);
+  st.tracking.seconds_resolve = step.lap();
+  retire_patches(t, patches);
+  st.tracking.seconds_retire = step.lap();
+  st.seconds_track = clock.lap();
+  return std::move(t.stats);
+}
+
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
@@ -304,69 +373,17 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
     prev = load_frame(frame_source(o), resume.state.header.frame);
     writer.resume(stats_lines_until(o, manifest, resume), resume.state.header.frame);
   }
-  // The tracking raster: only what carries over is decided there.
-  RasterOptions tracking = o.raster;
-  tracking.aov = false;
-  tracking.images = false;
-  tracking.dilate = false;
   try {
     for (std::size_t left = todo.size(); left > 0; --left) {
       stop_if_asked(writer);
-      Stopwatch frame_clock, clock;
+      Stopwatch frame_clock;
       // Read ahead: mesh, surface query, velocity, and step 6, the frame's
       // own atlases (they need only the mesh).
       const std::shared_ptr<Frame> frame = reader.next();
       Frame& cur = *frame;
       FrameStats& st = cur.stats;
-      st.seconds_read = clock.lap();
-
-      if (prev && !patches.patches.empty()) {
-        // Step 4: the patches follow the flow onto this frame's surface.
-        AdvectOptions advect = o.advect;
-        advect.dt = double(cur.number - prev->number) / o.fps;
-        const AdvectStats a = advect_patches(*cur.surface, prev->velocity, cur.velocity, o.patch, advect, patches);
-        st.patches_lost = a.patches_removed;
-        st.patch_vertices_removed = a.vertices_removed;
-        st.seconds_advect = clock.lap();
-        // Step 5.
-        update_weights(cur.mesh, o.patch.radius, o.weights, patches);
-        st.seconds_weights = clock.lap();
-      }
-      // New patches (seeding, hole filling) see this frame's flow.
-      PatchOptions born = o.patch;
-      born.velocity = &cur.velocity;
-      born.previous_velocity = prev ? &prev->velocity : nullptr;
-      born.dt = 1.0 / o.fps;
-      if (patches.patches.empty() && !cur.mesh.empty()) {
-        // Steps 1-3 on the first frame, and after the liquid vanished.
-        seed_patches(*cur.surface, cur.number, born, o.seeding, o.weights, patches);
-        st.patches_born += patches.patches.size();
-        st.seconds_seed = clock.lap();
-      }
-
-      // Steps 7-9 at the tracking resolution (docs/farm.md): lapped
-      // rasterization, the oldest non-eroded patch per texel; new patches at
-      // the holes' centres; the texels each patch won; retirement. Patches
-      // and their held cells then carry over to the next frame.
-      RasterStats tracked;
-      {
-        Stopwatch step;
-        const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
-        RasterBuffers t = begin_raster(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights, locate);
-        st.tracking.seconds_setup = step.lap();
-        draw_patches(t, patches);
-        st.tracking.seconds_draw = step.lap();
-        const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
-        fill_holes(t, patches, cur.number,
-                   surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number));
-        st.tracking.seconds_holes = step.lap();
-        resolve_texels(t, patches);
-        st.tracking.seconds_resolve = step.lap();
-        retire_patches(t, patches);
-        st.tracking.seconds_retire = step.lap();
-        tracked = std::move(t.stats);
-      }
-      st.seconds_track = clock.lap();
+      st.seconds_read = frame_clock.lap();
+      const RasterStats tracked = track_frame(cur, prev.get(), patches, textures, o);
 
       // The output at its own resolution, from the patches as they leave the
       // frame: what `lapflow render` does with the frame's state.

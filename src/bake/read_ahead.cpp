@@ -16,13 +16,7 @@ void FrameReader::start(std::size_t index) {
   pending_ = std::async(ahead_ ? std::launch::async : std::launch::deferred, [this, f = frames_[index]] {
     std::shared_ptr<Frame> frame = load_frame(source_, f);
     Stopwatch clock;
-    // The tracking atlas (the patches' decisions), then the output's.
-    AtlasOptions tracking = options_.atlas;
-    tracking.resolution =
-        tracking_resolution(surface_area(frame->mesh), options_.patch.radius, options_.track_texel);
-    tracking.gutter = kTrackingGutter;
-    frame->tracking_atlas = build_surface_atlas(frame->mesh, tracking);
-    if (!options_.track_only) frame->atlas = build_surface_atlas(frame->mesh, options_.atlas);
+    build_frame_atlases(*frame, options_);
     frame->stats.seconds_atlas = clock.lap();
     frame->stats.fresh_seeding = fresh_seeding_count(frame->mesh, frame->number, options_.patch, options_.seeding);
     return frame;

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/core/errors.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "io_test_helpers.hpp"
@@ -451,6 +452,18 @@ TEST(SurfaceAtlas, OverAThousandChartsReachTheUtilizationFloor) {
   check_atlas(m, a, o, {.density_share = 0.95, .utilization = 0.62});
 }
 
+// Two atlases are the same, chart for chart and texel for texel.
+void expect_same_atlas(const SurfaceAtlas& a, const SurfaceAtlas& b) {
+  EXPECT_EQ(a.resolution, b.resolution);
+  EXPECT_EQ(a.chart_count, b.chart_count);
+  EXPECT_EQ(a.chart_of_triangle, b.chart_of_triangle);
+  EXPECT_TRUE(a.corner_uv == b.corner_uv);
+  EXPECT_EQ(a.texels.texel, b.texels.texel);
+  EXPECT_EQ(a.texels.triangle, b.texels.triangle);
+  EXPECT_EQ(a.texels.b1, b.texels.b1);
+  EXPECT_EQ(a.texels.b2, b.texels.b2);
+}
+
 TEST(SurfaceAtlas, SameAtlasForOneAndTwoThreads) {
   TriMesh m = droplets(40);
   append(m, test::icosphere(4, 0.5, {2, 0, 0}));
@@ -461,12 +474,31 @@ TEST(SurfaceAtlas, SameAtlasForOneAndTwoThreads) {
   set_thread_count(2);
   const SurfaceAtlas two = build_surface_atlas(m, o);
   set_thread_count(0);
-  EXPECT_EQ(one.chart_of_triangle, two.chart_of_triangle);
-  EXPECT_TRUE(one.corner_uv == two.corner_uv);
-  EXPECT_EQ(one.texels.texel, two.texels.texel);
-  EXPECT_EQ(one.texels.triangle, two.texels.triangle);
-  EXPECT_EQ(one.texels.b1, two.texels.b1);
-  EXPECT_EQ(one.texels.b2, two.texels.b2);
+  expect_same_atlas(one, two);
+}
+
+// The bake builds its tracking and output atlases from one segmentation and
+// flattening (build_surface_atlases): each must be exactly the atlas built
+// alone for its options, on a synthetic mesh and on a shared frame.
+void expect_built_together_as_alone(const TriMesh& m) {
+  AtlasOptions tracking = options(512, 2), output = options(1024, 4);
+  const std::vector<SurfaceAtlas> both = build_surface_atlases(m, {tracking, output});
+  ASSERT_EQ(both.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const SurfaceAtlas alone = build_surface_atlas(m, k == 0 ? tracking : output);
+    expect_same_atlas(both[k], alone);
+    EXPECT_EQ(both[k].report.utilization, alone.report.utilization);
+  }
+  EXPECT_NE(both[0].texels.size(), both[1].texels.size());  // two resolutions, really
+  output.max_stretch = tracking.max_stretch * 1.5;
+  EXPECT_THROW(build_surface_atlases(m, {tracking, output}), UsageError);
+}
+
+TEST(SurfaceAtlas, AtlasesBuiltTogetherAreTheAtlasesBuiltAlone) {
+  TriMesh m = droplets(30);
+  append(m, test::icosphere(4, 0.5, {2, 0, 0}));
+  append(m, torus(60, 24, 1.0, 0.3), {0, 3, 0});
+  expect_built_together_as_alone(m);
 }
 
 TEST(SurfaceAtlas, TexelMapHoldsEveryTexelCentreInsideAChart) {
@@ -624,6 +656,11 @@ TEST(SurfaceAtlas, SharedFrameIsTheSameAtlasForOneAndTwoThreads) {
   EXPECT_EQ(one.chart_of_triangle, two.chart_of_triangle);
   EXPECT_TRUE(one.corner_uv == two.corner_uv);
   EXPECT_EQ(one.texels.texel, two.texels.texel);
+}
+
+TEST(SurfaceAtlas, SharedFrameBuiltTogetherIsTheAtlasBuiltAlone) {
+  if (!std::filesystem::exists(shared_frame("splash", 12))) GTEST_SKIP() << "../shared/data/splash is absent";
+  expect_built_together_as_alone(read_mesh(shared_frame("splash", 12)));
 }
 
 }  // namespace

@@ -77,4 +77,12 @@ struct SurfaceAtlas {
 /// [1, 65536], a negative gutter or max_stretch <= 1.
 SurfaceAtlas build_surface_atlas(const TriMesh& mesh, const AtlasOptions& options);
 
+/// build_surface_atlas once per entry of `options`, from one segmentation
+/// and one flattening: only the packing and the texel map depend on the
+/// resolution and the gutter, so each atlas is the one build_surface_atlas
+/// gives for its options. They must share max_stretch (UsageError
+/// otherwise). The first atlas's report holds the charts' and LSCM's
+/// seconds, the others' zero.
+std::vector<SurfaceAtlas> build_surface_atlases(const TriMesh& mesh, const std::vector<AtlasOptions>& options);
+
 }  // namespace lapflow

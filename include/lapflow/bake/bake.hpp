@@ -117,6 +117,21 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& options);
 /// asks to stop: checked before each frame and before writing one.
 void bake(const BakeOptions& options, const std::function<void(const FrameStats&)>& on_frame = {});
 
+/// Step 6 of a frame: its tracking atlas (tracking_resolution, kTrackingGutter)
+/// and, unless options.track_only, its output atlas. The bake's reader builds
+/// them ahead of the frame.
+void build_frame_atlases(Frame& frame, const BakeOptions& options);
+
+/// The tracking half of one frame, as `bake` and `lapflow track` run it: the
+/// patches advected from `previous` (none: the first frame) and their weights
+/// (steps 4-5), the seeding when no patch is left (steps 1-3), then steps 7-9
+/// at the tracking resolution (draw, hole filling with births, the texels
+/// each patch won, retirement). `frame` must have its tracking atlas.
+/// `patches` leave as the frame's state. Fills the tracking's part of
+/// frame.stats and returns the tracking raster's counts.
+RasterStats track_frame(Frame& frame, const Frame* previous, PatchSet& patches, const RasterExemplar& exemplar,
+                        const BakeOptions& options);
+
 /// The output of one frame from the patches as they leave it, as `bake` and
 /// `lapflow render` both draw it (docs/farm.md): the frame's output atlas
 /// must be built. Draws the patches at the output resolution, closes the
