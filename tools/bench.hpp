@@ -1,10 +1,22 @@
 #pragma once
 // Sections of the lapflow benchmark program (lapflow_bench), one function per
 // stage family, each in its own tools/bench_*.cpp.
+#include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
 namespace lapflow::bench {
+
+/// FNV-1a, 64-bit, over `bytes` bytes, continuing from `h`: the benches'
+/// digest of what they computed (equal digests before and after an
+/// optimisation mean the output did not change).
+inline constexpr uint64_t kFnvOffset = 1469598103934665603ull;
+inline uint64_t fnv1a(const void* data, std::size_t bytes, uint64_t h = kFnvOffset) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < bytes; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  return h;
+}
 
 /// Rasterizer alone (tools/bench_raster.cpp): a plane of 2 * grid_cells^2
 /// fluid triangles covered by about `target_patches` patches, one atlas per

@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <cstring>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -24,32 +23,18 @@
 namespace lapflow::bench {
 namespace {
 
-// A 64-bit digest of the images and of the patches' ids, births and
-// vertices (word-wise multiply-xorshift: a change anywhere changes it).
-struct Digest {
-  uint64_t h = 0x9E3779B97F4A7C15ull;
-  void words(const void* data, std::size_t bytes) {
-    const auto* p = static_cast<const unsigned char*>(data);
-    for (std::size_t i = 0; i + 8 <= bytes; i += 8) {
-      uint64_t w;
-      std::memcpy(&w, p + i, 8);
-      h = (h ^ w) * 0xff51afd7ed558ccdull;
-      h ^= h >> 32;
-    }
-    for (std::size_t i = bytes & ~std::size_t(7); i < bytes; ++i) h = (h ^ p[i]) * 0xc4ceb9fe1a85ec53ull;
-  }
-};
-
+// The digest of the images and of the patches' ids, births and vertices (a
+// change anywhere changes it).
 uint64_t digest(const Frame& frame, const PatchSet& patches) {
-  Digest d;
+  uint64_t h = kFnvOffset;
   for (const Image* img : {&frame.textures.color, &frame.textures.displacement, &frame.textures.aov})
-    d.words(img->pixels.data(), img->pixels.size() * sizeof(float));
+    h = fnv1a(img->pixels.data(), img->pixels.size() * sizeof(float), h);
   for (const Patch& p : patches.patches) {
-    d.words(&p.id, sizeof p.id);
-    d.words(&p.birth_frame, sizeof p.birth_frame);
-    d.words(p.positions.data(), p.positions.size() * sizeof(Vec3));
+    h = fnv1a(&p.id, sizeof p.id, h);
+    h = fnv1a(&p.birth_frame, sizeof p.birth_frame, h);
+    h = fnv1a(p.positions.data(), p.positions.size() * sizeof(Vec3), h);
   }
-  return d.h;
+  return h;
 }
 
 double median(std::vector<double> v) {

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "atlas/internal.hpp"
@@ -128,7 +129,9 @@ std::vector<SurfaceAtlas> build_surface_atlases(const TriMesh& mesh, const std::
     atlas.texels = atlas_detail::build_texel_map(atlas.corner_uv, o.resolution);
     atlas.report.seconds_texels = seconds_since(clock);
 
-    atlas.chart_of_triangle = charts.chart_of_triangle;
+    // The last atlas takes the segmentation's array; the others copy it.
+    if (k + 1 == options.size()) atlas.chart_of_triangle = std::move(charts.chart_of_triangle);
+    else atlas.chart_of_triangle = charts.chart_of_triangle;
     atlas.chart_count = charts.count;
     atlas.report.charts = charts.count;
     const double texels = double(o.resolution) * o.resolution;
