@@ -1,11 +1,11 @@
 // ALGORITHM.md steps 2-3: cut a patch out of the fluid surface around a point,
 // remesh it, flatten it with LSCM and place it in the unit square.
 #include <algorithm>
+#include <climits>
 #include <cmath>
-#include <deque>
+#include <cstdint>
 #include <numeric>
 #include <unordered_map>
-#include <unordered_set>
 
 #include <Eigen/Dense>
 
@@ -92,45 +92,71 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     const Vec3 q = closest_point_on_triangle(p, fluid.positions[f[0]], fluid.positions[f[1]], fluid.positions[f[2]]).point;
     return norm2(q - p) <= r2;
   };
-  std::unordered_set<uint64_t> directed;  // directed edges already in the patch
-  auto key = [](int32_t a, int32_t b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); };
+  // Per fluid triangle and vertex, stamped with this call's epoch instead of
+  // hash sets (patches are cut by the thousand, a few hundred triangles each).
+  struct Scratch {
+    std::vector<uint32_t> seen, kept, vertex;  // stamps
+    std::vector<int32_t> local;                 // fluid vertex -> patch vertex, where `vertex` is stamped
+    uint32_t epoch = 0;
+  };
+  thread_local Scratch z;
+  if (z.seen.size() != fluid.triangles.size() || z.vertex.size() != fluid.positions.size() || z.epoch == UINT32_MAX) {
+    z.seen.assign(fluid.triangles.size(), 0);
+    z.kept.assign(fluid.triangles.size(), 0);
+    z.vertex.assign(fluid.positions.size(), 0);
+    z.local.resize(fluid.positions.size());
+    z.epoch = 0;
+  }
+  const uint32_t epoch = ++z.epoch;
+  // Directed edge a -> b is in the patch when a kept triangle (one around a)
+  // has it.
+  auto has_directed = [&](int32_t a, int32_t b) {
+    for (int32_t i = adj.offsets[a]; i < adj.offsets[a + 1]; ++i) {
+      const int32_t u = adj.triangles[i];
+      if (z.kept[u] != epoch) continue;
+      const Tri& g = fluid.triangles[u];
+      for (int k = 0; k < 3; ++k)
+        if (g[k] == a && g[(k + 1) % 3] == b) return true;
+    }
+    return false;
+  };
   auto fits = [&](const Tri& f) {
     for (int k = 0; k < 3; ++k)
-      if (directed.count(key(f[k], f[(k + 1) % 3]))) return false;
+      if (has_directed(f[k], f[(k + 1) % 3])) return false;
     return true;
   };
-  std::vector<int> kept;
-  std::unordered_set<int> seen{seed_triangle};
-  std::deque<int> queue{seed_triangle};
-  while (!queue.empty()) {
-    const int t = queue.front();
-    queue.pop_front();
+  std::vector<int> kept, queue{seed_triangle};
+  z.seen[seed_triangle] = epoch;
+  for (std::size_t head = 0; head < queue.size(); ++head) {
+    const int t = queue[head];
     const Tri& f = fluid.triangles[t];
     if (!fits(f)) continue;
     kept.push_back(t);
-    for (int k = 0; k < 3; ++k) directed.insert(key(f[k], f[(k + 1) % 3]));
+    z.kept[t] = epoch;
     for (int k = 0; k < 3; ++k) {
       const int32_t a = f[k], b = f[(k + 1) % 3];
       for (int32_t i = adj.offsets[a]; i < adj.offsets[a + 1]; ++i) {
         const int u = adj.triangles[i];
-        if (seen.count(u)) continue;
+        if (z.seen[u] == epoch) continue;
         const Tri& g = fluid.triangles[u];
         if (g[0] != b && g[1] != b && g[2] != b) continue;  // shares only a vertex
-        seen.insert(u);
+        z.seen[u] = epoch;
         if (accept(u)) queue.push_back(u);
       }
     }
   }
   PatchMesh m;
-  std::unordered_map<int32_t, int32_t> local;
   m.triangles.reserve(kept.size());
   for (int t : kept) {
     Tri g{};
     for (int k = 0; k < 3; ++k) {
       const int32_t v = fluid.triangles[t][k];
-      auto [it, inserted] = local.try_emplace(v, int32_t(m.positions.size()));
-      if (inserted) m.positions.push_back(fluid.positions[v]);
-      g[k] = it->second;
+      if (z.vertex[v] != epoch) {
+        z.vertex[v] = epoch;
+        z.local[v] = int32_t(m.positions.size());
+        m.positions.push_back(fluid.positions[v]);
+      }
+      g[k] = z.local[v];
     }
     m.triangles.push_back(g);
   }
