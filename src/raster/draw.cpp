@@ -235,6 +235,8 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
     stamp.assign(ctx.mesh.triangles.size(), 0);
     epoch = 0;
   }
+  // A triangle is stamped once looked at, found or not: the distance test
+  // does not depend on where the walk came from, so each is tested once.
   ++epoch;
   auto add = [&](int32_t f) {
     if (stamp[std::size_t(f)] == epoch) return false;
@@ -252,8 +254,9 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
       for (int32_t j = ctx.vt_offset[ft[k]]; j < ctx.vt_offset[ft[k] + 1]; ++j) {
         const int32_t g2 = ctx.vt_list[j];
         if (stamp[std::size_t(g2)] == epoch) continue;
+        stamp[std::size_t(g2)] = epoch;
         if (norm(ctx.tri_centroid[g2] - g.centre) > g.radius + ctx.tri_radius[g2] + g.margin) continue;
-        add(g2);
+        found.push_back(g2);
       }
   }
   const auto& tm = ctx.atlas.texels;
