@@ -1,7 +1,10 @@
 // Patch creation and LSCM flattening (ALGORITHM.md steps 2-3).
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <map>
+#include <utility>
 
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/patches/patches.hpp"
@@ -259,6 +262,50 @@ TEST(PatchesCreate, DropsTrianglesFacingAwayAndOrientationFollowsTheSeed) {
   const Vec3 x1 = point_at_uv(*c, {0.6, 0.5});
   EXPECT_NEAR(x1.x - 0.5, 0.1 * 2 * o.radius, 1e-9);
   EXPECT_NEAR(x1.y - 0.5, 0.0, 1e-9);
+}
+
+TEST(PatchesCreate, CutNeverTakesADirectedEdgeTwice) {
+  // A fin on a plane: a third triangle on the edge (a, b) of the patch's
+  // seed triangle, facing up and oriented like the seed's neighbour, so that
+  // neighbour and the fin both run b -> a. A cut taking both would be no
+  // oriented surface (LSCM needs one): it keeps one of them.
+  TriMesh m = test::plane_grid(20, 20, 1.0, 1.0);
+  SurfaceQuery flat(m);
+  const Vec3 p{0.512, 0.493, 0};
+  const int seed = flat.closest(p, 1.0).triangle;
+  ASSERT_GE(seed, 0);
+  const Tri s = m.triangles[seed];
+  const int32_t a = s[0], b = s[1];
+  int neighbour = -1;  // the triangle holding b -> a
+  for (int t = 0; t < int(m.triangles.size()); ++t)
+    for (int k = 0; k < 3; ++k)
+      if (m.triangles[t][k] == b && m.triangles[t][(k + 1) % 3] == a) neighbour = t;
+  ASSERT_GE(neighbour, 0);
+  const Tri& nt = m.triangles[neighbour];
+  const int32_t d = nt[0] != a && nt[0] != b ? nt[0] : nt[1] != a && nt[1] != b ? nt[1] : nt[2];
+  m.positions.push_back(m.positions[d] + Vec3{0, 0, 0.01});  // the fin's apex, just above d
+  m.triangles.push_back({b, a, int32_t(m.positions.size() - 1)});
+  SurfaceQuery q(m);
+  PatchOptions o;
+  o.radius = 0.12;
+  o.remesh = false;  // the cut itself
+  const auto patch = create_patch(q, {p, {0, 0, 1}, seed}, 1, 0, o, {});
+  ASSERT_TRUE(patch);
+  // By position (split vertices share one): every directed edge once.
+  std::map<std::pair<std::array<double, 3>, std::array<double, 3>>, int> directed;
+  auto at = [&](int32_t v) {
+    const Vec3& x = patch->positions[v];
+    return std::array<double, 3>{x.x, x.y, x.z};
+  };
+  for (const Tri& f : patch->triangles)
+    for (int k = 0; k < 3; ++k) {
+      const int uses = ++directed[std::make_pair(at(f[k]), at(f[(k + 1) % 3]))];
+      EXPECT_EQ(uses, 1);
+    }
+  // The seed's plane around p is all there: about pi r^2 / (1/20^2 / 2)
+  // grid triangles, whichever of the neighbour and the fin was kept.
+  EXPECT_GT(patch->triangles.size(), 30u);
+  EXPECT_LT(norm(point_at_uv(*patch, {0.5, 0.5}) - p), 1e-9);
 }
 
 TEST(PatchesCreate, RemeshingCostStaysBoundedWhenFluidTrianglesDwarfThePatch) {
