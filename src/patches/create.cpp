@@ -10,6 +10,7 @@
 #include <Eigen/Dense>
 
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/core/stamp_set.hpp"
 #include "lapflow/patches/patches.hpp"
 #include "patches/internal.hpp"
 
@@ -92,28 +93,23 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     const Vec3 q = closest_point_on_triangle(p, fluid.positions[f[0]], fluid.positions[f[1]], fluid.positions[f[2]]).point;
     return norm2(q - p) <= r2;
   };
-  // Per fluid triangle and vertex, stamped with this call's epoch instead of
-  // hash sets (patches are cut by the thousand, a few hundred triangles each).
+  // Per-thread sets over the fluid's triangles and vertices instead of hash
+  // sets (patches are cut by the thousand, a few hundred triangles each).
   struct Scratch {
-    std::vector<uint32_t> seen, kept, vertex;  // stamps
-    std::vector<int32_t> local;                 // fluid vertex -> patch vertex, where `vertex` is stamped
-    uint32_t epoch = 0;
+    StampSet seen, kept, vertex;
+    std::vector<int32_t> local;  // fluid vertex -> patch vertex, for the vertices in `vertex`
   };
   thread_local Scratch z;
-  if (z.seen.size() != fluid.triangles.size() || z.vertex.size() != fluid.positions.size() || z.epoch == UINT32_MAX) {
-    z.seen.assign(fluid.triangles.size(), 0);
-    z.kept.assign(fluid.triangles.size(), 0);
-    z.vertex.assign(fluid.positions.size(), 0);
-    z.local.resize(fluid.positions.size());
-    z.epoch = 0;
-  }
-  const uint32_t epoch = ++z.epoch;
+  z.seen.clear(fluid.triangles.size());
+  z.kept.clear(fluid.triangles.size());
+  z.vertex.clear(fluid.positions.size());
+  if (z.local.size() < fluid.positions.size()) z.local.resize(fluid.positions.size());
   // Directed edge a -> b is in the patch when a kept triangle (one around a)
   // has it.
   auto has_directed = [&](int32_t a, int32_t b) {
     for (int32_t i = adj.offsets[a]; i < adj.offsets[a + 1]; ++i) {
       const int32_t u = adj.triangles[i];
-      if (z.kept[u] != epoch) continue;
+      if (!z.kept.contains(std::size_t(u))) continue;
       const Tri& g = fluid.triangles[u];
       for (int k = 0; k < 3; ++k)
         if (g[k] == a && g[(k + 1) % 3] == b) return true;
@@ -126,21 +122,21 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     return true;
   };
   std::vector<int> kept, queue{seed_triangle};
-  z.seen[seed_triangle] = epoch;
+  z.seen.insert(std::size_t(seed_triangle));
   for (std::size_t head = 0; head < queue.size(); ++head) {
     const int t = queue[head];
     const Tri& f = fluid.triangles[t];
     if (!fits(f)) continue;
     kept.push_back(t);
-    z.kept[t] = epoch;
+    z.kept.insert(std::size_t(t));
     for (int k = 0; k < 3; ++k) {
       const int32_t a = f[k], b = f[(k + 1) % 3];
       for (int32_t i = adj.offsets[a]; i < adj.offsets[a + 1]; ++i) {
         const int u = adj.triangles[i];
-        if (z.seen[u] == epoch) continue;
+        if (z.seen.contains(std::size_t(u))) continue;
         const Tri& g = fluid.triangles[u];
         if (g[0] != b && g[1] != b && g[2] != b) continue;  // shares only a vertex
-        z.seen[u] = epoch;
+        z.seen.insert(std::size_t(u));
         if (accept(u)) queue.push_back(u);
       }
     }
@@ -151,8 +147,7 @@ PatchMesh cut_patch(const TriMesh& fluid, const SurfaceAdjacency& adj, int seed_
     Tri g{};
     for (int k = 0; k < 3; ++k) {
       const int32_t v = fluid.triangles[t][k];
-      if (z.vertex[v] != epoch) {
-        z.vertex[v] = epoch;
+      if (z.vertex.insert(std::size_t(v))) {
         z.local[v] = int32_t(m.positions.size());
         m.positions.push_back(fluid.positions[v]);
       }

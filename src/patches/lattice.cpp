@@ -21,6 +21,7 @@
 #include <limits>
 #include <numeric>
 
+#include "lapflow/core/stamp_set.hpp"
 #include "lapflow/surface/surface_query.hpp"
 #include "patches/internal.hpp"
 
@@ -66,7 +67,8 @@ struct Scratch {
   std::vector<LatticePoint> lattice;
   std::vector<Vec2> flat;
   std::vector<std::pair<uint64_t, int32_t>> edges;
-  std::vector<int32_t> neighbour, stamp, queue;
+  std::vector<int32_t> neighbour, queue;
+  StampSet walked;  // triangles of the current walk
   std::vector<uint8_t> candidate;
 };
 [[gnu::noinline]] Scratch& thread_scratch() {
@@ -163,20 +165,18 @@ LatticeResult lattice_resample(const SurfaceQuery& surface, const PatchMesh& cut
   // Walk from one end's triangle across cut edges, through the triangles the
   // segment touches, to the other end's: a segment crossing a hole or a gap
   // (a border edge of the cut) cannot get there.
-  std::vector<int32_t>&stamp = scratch.stamp, &queue = scratch.queue;
-  stamp.assign(std::size_t(nt), 0);
-  int32_t walk = 0;
+  StampSet& walked = scratch.walked;
+  std::vector<int32_t>& queue = scratch.queue;
   auto inside_cut = [&](const LatticePoint& u, const Vec2& qu, const LatticePoint& v, const Vec2& qv) {
     if (u.triangle == v.triangle) return true;
-    ++walk;
+    walked.clear(std::size_t(nt));
     queue.assign(1, u.triangle);
-    stamp[u.triangle] = walk;
+    walked.insert(std::size_t(u.triangle));
     for (std::size_t k = 0; k < queue.size() && k < 512; ++k) {
       const int32_t t = queue[k];
       for (int e = 0; e < 3; ++e) {
         const int32_t w = neighbour[3 * t + e];
-        if (w < 0 || stamp[w] == walk) continue;
-        stamp[w] = walk;
+        if (w < 0 || !walked.insert(std::size_t(w))) continue;
         const Tri& g = cut.triangles[w];
         if (!touches(flat[g[0]], flat[g[1]], flat[g[2]], qu, qv, 1e-7 * L)) continue;
         if (w == v.triangle) return true;

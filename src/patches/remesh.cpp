@@ -18,6 +18,7 @@
 #include <cmath>
 #include <functional>
 
+#include "lapflow/core/stamp_set.hpp"
 #include "patches/internal.hpp"
 
 namespace lapflow::detail {
@@ -105,8 +106,7 @@ class IsotropicRemesher {
   std::vector<int> twin_;        // per halfedge; -1 on the border
   // Scratch.
   std::vector<int> ring_a_, ring_b_, ring_c_, nb_a_, nb_b_, valence_;
-  std::vector<uint32_t> stamp_;
-  uint32_t stamp_now_ = 0;
+  StampSet around_a_;  // nb_a_, for the link condition
   std::vector<std::pair<double, int>> queue_;
 };
 
@@ -290,11 +290,10 @@ bool IsotropicRemesher::collapse_allowed(int h, const Vec3& q, double high2) {
     for (int v : nb_b_)
       if (v != a && norm2(pos_[v] - q) > high2) return false;
   // Link condition: a and b share exactly the opposite vertices of their edge.
-  if (stamp_.size() < pos_.size()) stamp_.resize(pos_.size(), 0);
-  if (++stamp_now_ == 0) std::fill(stamp_.begin(), stamp_.end(), 0), stamp_now_ = 1;
-  for (int v : nb_a_) stamp_[v] = stamp_now_;
+  around_a_.clear(pos_.size());
+  for (int v : nb_a_) around_a_.insert(std::size_t(v));
   int shared = 0;
-  for (int v : nb_b_) shared += stamp_[v] == stamp_now_;
+  for (int v : nb_b_) shared += around_a_.contains(std::size_t(v));
   if (shared != (o >= 0 ? 2 : 1)) return false;
   // Faces that survive keep their orientation and some area.
   for (const std::vector<int>* r : {&ring_a_, &ring_b_}) {

@@ -15,6 +15,7 @@
 #include <stdexcept>
 
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/core/stamp_set.hpp"
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/raster/raster.hpp"
 #include "raster/internal.hpp"
@@ -225,36 +226,23 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
-  // Triangles already in `found`, by an epoch stamp per fluid triangle: a
-  // linear search made the walk quadratic, and a patch stretched over the
-  // whole liquid (--mode advect) walks the 4096 triangles of the guard for
-  // each of its triangles (140 s a frame on channel at 1024²).
-  thread_local std::vector<uint32_t> stamp;
-  thread_local uint32_t epoch = 0;
-  if (stamp.size() != ctx.mesh.triangles.size() || epoch == UINT32_MAX) {
-    stamp.assign(ctx.mesh.triangles.size(), 0);
-    epoch = 0;
-  }
-  // A triangle is stamped once looked at, found or not: the distance test
-  // does not depend on where the walk came from, so each is tested once.
-  ++epoch;
-  auto add = [&](int32_t f) {
-    if (stamp[std::size_t(f)] == epoch) return false;
-    stamp[std::size_t(f)] = epoch;
-    found.push_back(f);
-    return true;
-  };
+  // Triangles looked at, found or not, in a per-thread set: a linear search
+  // of `found` made the walk quadratic, and a patch stretched over the whole
+  // liquid (--mode advect) walks the 4096 triangles of the guard for each of
+  // its triangles (140 s a frame on channel at 1024²). The distance test does
+  // not depend on where the walk came from, so each triangle is tested once.
+  thread_local StampSet looked;
+  looked.clear(ctx.mesh.triangles.size());
   found.clear();
   for (int k = 0; k < 3; ++k)
-    if (vtri[k] >= 0) add(vtri[k]);
+    if (vtri[k] >= 0 && looked.insert(std::size_t(vtri[k]))) found.push_back(vtri[k]);
   constexpr std::size_t kMaxWalk = 4096;  // guard against pathological meshes
   for (std::size_t q = 0; q < found.size() && found.size() < kMaxWalk; ++q) {
     const Tri& ft = ctx.mesh.triangles[found[q]];
     for (int k = 0; k < 3; ++k)
       for (int32_t j = ctx.vt_offset[ft[k]]; j < ctx.vt_offset[ft[k] + 1]; ++j) {
         const int32_t g2 = ctx.vt_list[j];
-        if (stamp[std::size_t(g2)] == epoch) continue;
-        stamp[std::size_t(g2)] = epoch;
+        if (!looked.insert(std::size_t(g2))) continue;
         if (norm(ctx.tri_centroid[g2] - g.centre) > g.radius + ctx.tri_radius[g2] + g.margin) continue;
         found.push_back(g2);
       }
