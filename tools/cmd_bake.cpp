@@ -92,6 +92,7 @@ void run_bake(BakeCli& c) {
   if (c.paper) {
     o.raster.use_paper_hole_filling();
     o.patch.anticipate = 0;
+    o.advect.through_flow = false;
   }
   o.keep_states = parse_keep_states(c.keep_states);
   if (o.track_only) o.keep_states = -1;  // render needs every frame's
@@ -249,6 +250,13 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                  "random (from seed and patch id) or world:x,y,z (u along that direction on the tangent plane)")
       ->capture_default_str()
       ->group("Patches");
+  CLI::Option* through_flow =
+      cmd.add_flag("--through-flow,!--no-through-flow", o.advect.through_flow,
+                   "Where the liquid crosses its own surface (an outflow or inflow face: a vertex's step leaves the "
+                   "surface along its normal while the surface stays), the texture keeps to the surface with the "
+                   "tangential part of the step instead of being cut away there and born again every frame (on by "
+                   "default; --no-through-flow: removed, as in the paper; docs/temporal.md)")
+          ->group("Patches");
   CLI::Option* anticipate =
       cmd.add_option("--anticipate", o.patch.anticipate,
                      "New patches are born deformed against the flow they will meet (predicted as if the flow were "
@@ -301,13 +309,14 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_flag("--paper", c.paper,
                "The paper's patches, hole filling and retirement as published, for comparisons: conformal new "
                "patches, every hole a new patch, no hysteresis, only patches that won nothing retire (= "
-               "--anticipate 0 --small-hole 0 --rest-hole 0 --no-hold --merge 0). The population then grows on steady flow "
+               "--anticipate 0 --no-through-flow --small-hole 0 --rest-hole 0 --no-hold --merge 0). The population then grows on steady flow "
                "and a still liquid keeps churning (docs/temporal.md)")
       ->excludes(small_hole)
       ->excludes(rest_hole)
       ->excludes(hold)
       ->excludes(merge)
       ->excludes(anticipate)
+      ->excludes(through_flow)
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "

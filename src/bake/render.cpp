@@ -131,6 +131,8 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   s.read("advect_max_step_fraction", o.advect.max_step_fraction);
   s.read("advect_max_turn", o.advect.max_turn);
   s.read("advect_max_projection", o.advect.max_projection);
+  if (!s.find("advect_through_flow")) o.advect.through_flow = false;  // a bake before stop 29 removed those vertices
+  s.read("advect_through_flow", o.advect.through_flow);
   s.read("center_radius", o.weights.center_radius);
   s.read("gutter", o.atlas.gutter);
   s.read("max_stretch", o.atlas.max_stretch);

@@ -249,6 +249,81 @@ TEST(PatchesAdvect, VerticesThatLeaveTheSurfaceAreRemoved) {
   EXPECT_GT(zero, 0);
 }
 
+// A face the liquid crosses (an outflow or inflow face of a simulation
+// domain): the surface stays where it is while the fluid passes through it.
+// The velocity's step along the normal is longer than the projection reach.
+TEST(PatchesAdvect, ThroughFlowFaceKeepsItsTextureWithTheTangentialStep) {
+  const double r = 0.18, dt = 1.0 / 24;  // reach r/4 = 4.5 cm
+  const TriMesh plane = test::plane_grid(80, 40, 2.0, 1.0);
+  const TriMesh remeshed = test::plane_grid(70, 30, 2.0, 1.0);  // the same face, other vertices
+  SurfaceQuery q0(plane), q1(remeshed);
+  PatchOptions po;
+  po.radius = r;
+  const Vec3 velocity{0.3, 0.1, -2.0};  // 8.3 cm a frame into the face, 1.3 cm along it
+  const VelocityField v = [&](const Vec3&) { return velocity; };
+  PatchSet start;
+  auto p = create_patch(q0, {{1.0, 0.5, 0}, {0, 0, 1}, -1}, start.next_id++, 0, po, {});
+  ASSERT_TRUE(p);
+  start.patches.push_back(std::move(*p));
+  AdvectOptions ao;
+  ao.dt = dt;
+  ASSERT_TRUE(ao.through_flow) << "the default";
+
+  PatchSet kept = start;
+  const AdvectStats st = advect_patches(q1, v, v, po, ao, kept);
+  EXPECT_EQ(st.vertices_removed, 0u);
+  ASSERT_EQ(kept.patches.size(), 1u);
+  ASSERT_EQ(kept.patches[0].positions.size(), start.patches[0].positions.size());
+  const Vec3 tangential{velocity.x * dt, velocity.y * dt, 0};
+  for (std::size_t k = 0; k < start.patches[0].positions.size(); ++k) {
+    const Vec3 want = start.patches[0].positions[k] + tangential;
+    EXPECT_LT(norm(kept.patches[0].positions[k] - want), 1e-9) << "vertex " << k;
+    EXPECT_EQ(kept.patches[0].rest_uv[k].x, start.patches[0].rest_uv[k].x);
+  }
+
+  // The paper's rule: every vertex is farther than r/4 from the face, and
+  // the patch goes.
+  ao.through_flow = false;
+  PatchSet removed = start;
+  EXPECT_EQ(advect_patches(q1, v, v, po, ao, removed).patches_removed, 1u);
+  EXPECT_TRUE(removed.patches.empty());
+}
+
+// Only a crossing counts: a step that runs along the surface off its edge, or
+// a surface that moved away, still removes the vertices, with or without the
+// rule.
+TEST(PatchesAdvect, ThroughFlowLeavesOtherLossesAlone) {
+  const double r = 0.18, dt = 1.0 / 24;
+  const TriMesh plane = test::plane_grid(50, 50, 1.0, 1.0);
+  SurfaceQuery q(plane);
+  PatchOptions po;
+  po.radius = r;
+  PatchSet start;
+  for (const Vec3& c : {Vec3{0.9, 0.5, 0}, Vec3{0.4, 0.5, 0}}) {
+    auto p = create_patch(q, {c, {0, 0, 1}, -1}, start.next_id++, 0, po, {});
+    ASSERT_TRUE(p);
+    start.patches.push_back(std::move(*p));
+  }
+  AdvectOptions on, off;
+  on.dt = off.dt = dt;
+  off.through_flow = false;
+  // 12.5 cm a frame along the face: the patch at x = 0.9 runs off its edge.
+  const VelocityField along = [](const Vec3&) { return Vec3{3.0, 0, 0}; };
+  PatchSet a = start, b = start;
+  const AdvectStats sa = advect_patches(q, along, along, po, on, a);
+  const AdvectStats sb = advect_patches(q, along, along, po, off, b);
+  EXPECT_GT(sa.vertices_removed, 0u) << "the edge must cut the first patch, or this shows nothing";
+  EXPECT_EQ(sa.vertices_removed, sb.vertices_removed);
+  ASSERT_EQ(a.patches.size(), b.patches.size());
+  for (std::size_t i = 0; i < a.patches.size(); ++i) EXPECT_EQ(a.patches[i].positions, b.patches[i].positions);
+
+  // The face moved away by r with the fluid standing still: the same.
+  const SurfaceQuery away(test::plane_grid(50, 50, 1.0, 1.0, r));
+  const VelocityField still = [](const Vec3&) { return Vec3{}; };
+  PatchSet c = start;
+  EXPECT_EQ(advect_patches(away, still, still, po, on, c).patches_removed, 2u);
+}
+
 TEST(PatchesWeights, FoldedTriangleHasZeroQuality) {
   const TriMesh plane = test::plane_grid(20, 20, 1.0, 1.0);
   SurfaceQuery q(plane);

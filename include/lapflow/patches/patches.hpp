@@ -136,6 +136,13 @@ struct AdvectOptions {
   /// with the speed (a fast translation is integrated exactly in one step).
   double max_turn = 0.05;
   double max_projection = 0.25;    ///< remove vertices moved farther than this * r by projection
+  /// Where the liquid crosses its own surface (a step leaves the surface by
+  /// more than max_projection along its normal while the surface is still
+  /// within max_projection of where the vertex was: an outflow or inflow
+  /// face), the vertex keeps to the surface with the tangential part of its
+  /// step instead of being removed. Off: removed, as in the paper.
+  /// docs/temporal.md, "Through-flow faces".
+  bool through_flow = true;
 };
 
 struct WeightOptions {
