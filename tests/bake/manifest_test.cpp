@@ -5,6 +5,7 @@
 
 #include "io_test_helpers.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/render.hpp"
 #include "lapflow/core/errors.hpp"
 
 namespace lapflow {
@@ -43,6 +44,33 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   }
   EXPECT_EQ(parse_raster_mode(raster_mode_name(RasterMode::Blend)), RasterMode::Blend);
   EXPECT_THROW(parse_raster_mode("fade"), UsageError);
+}
+
+// A bake's advection rule reaches the tools that advect again from its
+// manifest (the replay bench); a manifest written before the rule existed
+// means the bake removed those vertices.
+TEST(BakeManifest, ThroughFlowReadsBackAndIsOffForOlderManifests) {
+  BakeOptions o;
+  o.name = "shot";
+  o.out_dir = "/tmp";
+  o.mesh_pattern = "sim/fluid.%04d.ply";
+  o.patch.radius = 0.04;
+  for (const bool on : {true, false}) {
+    o.advect.through_flow = on;
+    const BakeManifest m = make_bake_manifest(o, {1, 2});
+    EXPECT_EQ(m.settings.at("advect_through_flow"), on ? "true" : "false");
+    EXPECT_EQ(bake_options_from_manifest(m).advect.through_flow, on);
+  }
+  BakeManifest old = make_bake_manifest(o, {1, 2});
+  old.settings.erase("advect_through_flow");
+  EXPECT_FALSE(bake_options_from_manifest(old).advect.through_flow);
+  old.settings["advect_through_flow"] = "maybe";
+  try {
+    bake_options_from_manifest(old);
+    ADD_FAILURE() << "a malformed setting must be an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("settings.advect_through_flow: 'maybe'"), std::string::npos) << e.what();
+  }
 }
 
 TEST(BakeManifest, ErrorsNameTheFile) {
