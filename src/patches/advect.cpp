@@ -93,6 +93,13 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     }
     return x;
   };
+  // The point a vertex at `from` lands on: a point already on the surface
+  // stays bit for bit (stillness: zero velocity on an unchanged mesh must
+  // not let rounding creep).
+  auto settle = [&](ClosestHit h, const Vec3& from) {
+    if (h.distance <= on_surface) h.point = from;
+    return h;
+  };
   // A vertex whose step leaves the surface while the surface stays where it
   // was: the liquid crosses its surface there (an outflow or inflow face, or
   // a velocity the mesh does not follow). The step's part along the normal
@@ -102,12 +109,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
   // edge: the vertex left with the liquid).
   const TriMesh& next_mesh = next.mesh();
   auto across = [&](const Vec3& x0, const Vec3& step) {
-    // A point on the surface stays bit for bit, as below.
-    auto on_surface = [&](ClosestHit h, const Vec3& from) {
-      if (h.distance <= 1e-9 * r) h.point = from;
-      return h;
-    };
-    const ClosestHit here = on_surface(next.closest(x0, max_proj), x0);
+    const ClosestHit here = settle(next.closest(x0, max_proj), x0);
     if (!(here.found && here.distance <= max_proj)) return ClosestHit{};
     const Vec3 n2 = triangle_normal_area2(next_mesh, here.triangle);
     const double l = norm(n2);
@@ -116,7 +118,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     const double along_normal = dot(step, n);
     if (!(std::abs(along_normal) > max_proj)) return ClosestHit{};
     const Vec3 to = here.point + (step - n * along_normal);
-    const ClosestHit slid = on_surface(next.closest(to, max_proj), to);
+    const ClosestHit slid = settle(next.closest(to, max_proj), to);
     return slid.found && slid.distance <= max_proj ? slid : here;
   };
   parallel_for(nverts + np, [&](std::size_t b, std::size_t e) {
@@ -144,14 +146,10 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       // closest point within max_proj too, so the answer is the same.
       ClosestHit hit = next.closest(x, kNearFraction * max_proj);
       if (!hit.found) hit = next.closest(x, max_proj);
-      if (!(hit.found && hit.distance <= max_proj) && options.through_flow && i < nverts) {
-        hit = across(x0, x - x0);
-        if (hit.found) m.position = hit.point;
-      }
+      hit = settle(hit, x);
+      if (!(hit.found && hit.distance <= max_proj) && options.through_flow && i < nverts) hit = across(x0, x - x0);
       if (hit.found && hit.distance <= max_proj) {
-        // A point already on the surface stays bit for bit (stillness: zero
-        // velocity on an unchanged mesh must not let rounding creep).
-        if (hit.distance > 1e-9 * r) m.position = hit.point;
+        m.position = hit.point;
         m.triangle = hit.triangle;
         m.kept = true;
       }
