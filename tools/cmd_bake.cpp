@@ -294,6 +294,14 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                    "small holes it closed (on by default; --no-hold: the paper's memoryless test; "
                    "docs/temporal.md)")
           ->group("Erosion");
+  CLI::Option* rest_bound =
+      cmd.add_flag("--rest-bound,!--no-rest-bound", o.raster.rest_bound,
+                   "With --hold: a patch at rest (below --min-speed) takes no surface farther than two tracking "
+                   "texels from what it held, so the strip a spreading still liquid uncovers continues the patch "
+                   "beside it instead of whichever patch's far edge reaches over the rim; the output atlas shows "
+                   "every patch only where the tracking did (on by default; --no-rest-bound: a patch wins wherever "
+                   "its erosion test passes; docs/temporal.md)")
+          ->group("Erosion");
   cmd.add_option("--hold-margin", o.raster.hold_margin,
                  "Where a patch won texels before, its erosion test passes with w lower by this much")
       ->capture_default_str()
@@ -309,11 +317,13 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_flag("--paper", c.paper,
                "The paper's patches, hole filling and retirement as published, for comparisons: conformal new "
                "patches, every hole a new patch, no hysteresis, only patches that won nothing retire (= "
-               "--anticipate 0 --no-through-flow --small-hole 0 --rest-hole 0 --no-hold --merge 0). The population then grows on steady flow "
+               "--anticipate 0 --no-through-flow --small-hole 0 --rest-hole 0 --no-hold --no-rest-bound --merge 0). The "
+               "population then grows on steady flow "
                "and a still liquid keeps churning (docs/temporal.md)")
       ->excludes(small_hole)
       ->excludes(rest_hole)
       ->excludes(hold)
+      ->excludes(rest_bound)
       ->excludes(merge)
       ->excludes(anticipate)
       ->excludes(through_flow)

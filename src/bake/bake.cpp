@@ -255,6 +255,7 @@ void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& e
   Stopwatch clock;
   RasterOptions output = o.raster;
   output.mark_held = false;  // nothing retires here: the tracking marked the cells
+  output.held_texel = o.track_texel;
   frame.raster = begin_raster(frame.mesh, frame.atlas, exemplar, output, o.weights,
                               surface_triangle_locator(*frame.surface, o.raster.radius));
   draw_patches(frame.raster, patches);
@@ -325,6 +326,7 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
   // and their held cells then carry over to the next frame. Only what
   // carries over is decided here: no image.
   RasterOptions tracking = o.raster;
+  tracking.held_texel = o.track_texel;
   tracking.aov = false;
   tracking.images = false;
   tracking.dilate = false;

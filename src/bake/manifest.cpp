@@ -142,6 +142,7 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   s["max_stretch"] = text(o.atlas.max_stretch);
   s["fill_holes"] = text(o.raster.fill_holes);
   s["retire"] = text(o.raster.retire);
+  s["rest_bound"] = text(o.raster.rest_bound);
   s["mipmap"] = text(o.raster.mipmap);
   s["trilinear"] = text(o.raster.trilinear);
   s["dilate"] = text(o.raster.dilate);

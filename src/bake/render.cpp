@@ -138,6 +138,8 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   s.read("max_stretch", o.atlas.max_stretch);
   s.read("fill_holes", o.raster.fill_holes);
   s.read("retire", o.raster.retire);
+  if (!s.find("rest_bound")) o.raster.rest_bound = false;  // a bake before stop 30 let patches at rest win anywhere
+  s.read("rest_bound", o.raster.rest_bound);
   s.read("mipmap", o.raster.mipmap);
   s.read("trilinear", o.raster.trilinear);
   s.read("dilate", o.raster.dilate);

@@ -51,16 +51,90 @@ inline float vertex_weight(const Patch& patch, int v) {
   return patch.weight.size() == patch.positions.size() ? patch.weight[v] : 1.f;
 }
 
-// The erosion test, with the hold where the patch won texels before
-// (RasterOptions::hold).
+// The cells where the patch of index p may win a texel when it is bound
+// (RasterOptions::rest_bound), or nullptr: wherever its test passes.
+inline const uint64_t* rest_ground(const RasterContext& ctx, std::size_t p) {
+  if (p >= ctx.rest_ground_slot.size() || ctx.rest_ground_slot[p] < 0) return nullptr;
+  return &ctx.rest_ground[std::size_t(ctx.rest_ground_slot[p]) * kHeldWords];
+}
+
+// Chart texel i at pixel (x, y) has its 3x3 neighbourhood in its own chart.
+// Only such texels mark held cells (resolve_texels), so the cells of a won
+// region stop about a texel short of its chart's border.
+bool interior_texel(const RasterContext& ctx, std::size_t i, int x, int y) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  const int chart = ctx.atlas.chart_of_triangle[tm.triangle[i]];
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = x + dx, yy = y + dy;
+      const int32_t n = xx < 0 || yy < 0 || xx >= N || yy >= N ? -1 : ctx.index[std::size_t(yy) * N + xx];
+      if (n < 0 || ctx.atlas.chart_of_triangle[tm.triangle[n]] != chart) return false;
+    }
+  return true;
+}
+
+// The erosion test of texel idx at pixel (x, y), with the hold where the
+// patch won texels before (RasterOptions::hold), and for a bound patch,
+// nothing beyond them (`ground`: rest_ground, or nullptr) but next to a
+// chart's border, where no texel marks a cell.
 // w is linear on the patch triangle: `slope` is its gradient's length in
 // uv, so w + slope x reach bounds w within the reach (weight_slope).
-inline bool passes(const RasterContext& ctx, const Patch& patch, double u, double v, double w, double slope) {
+inline bool passes(const RasterContext& ctx, const Patch& patch, const uint64_t* ground, int32_t idx, int x, int y,
+                   double u, double v, double w, double slope) {
   if (ctx.hold && held_at(patch.held, u, v)) {
     const double r = ctx.held_reach;
     return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
-  return keeps(ctx.erosion, u, v, w, ctx.mode);
+  if (!keeps(ctx.erosion, u, v, w, ctx.mode)) return false;
+  return !ground || held_at(ground, u, v) || !interior_texel(ctx, std::size_t(idx), x, y);
+}
+
+// `held` (kHeldWords words) grown by `reach` cells along u and v into `out`:
+// a cell is set when one within a square of side 2 reach + 1 around it is.
+// A row of kHeldCells = 128 cells is two words, bit u of the row.
+void grow_cells(const uint64_t* held, int reach, uint64_t* out) {
+  static_assert(kHeldCells == 128, "a row is two words");
+  std::array<uint64_t, 2 * kHeldCells> rows;
+  for (int y = 0; y < kHeldCells; ++y) {
+    const uint64_t lo = held[2 * y], hi = held[2 * y + 1];
+    uint64_t glo = lo, ghi = hi;
+    for (int k = 1; k <= reach; ++k) {
+      glo |= lo << k | lo >> k | hi << (64 - k);  // cell u - k and u + k; row bits 64.. shift into the low word
+      ghi |= hi << k | hi >> k | lo >> (64 - k);
+    }
+    rows[2 * y] = glo, rows[2 * y + 1] = ghi;
+  }
+  for (int y = 0; y < kHeldCells; ++y) {
+    uint64_t lo = 0, hi = 0;
+    for (int z = std::max(0, y - reach); z <= std::min(kHeldCells - 1, y + reach); ++z)
+      lo |= rows[2 * z], hi |= rows[2 * z + 1];
+    out[2 * y] = lo, out[2 * y + 1] = hi;
+  }
+}
+
+// RasterOptions::rest_bound: the cells of every patch at rest (in a render:
+// every patch) that held some, grown by rest_reach_cells.
+void bind_rest_ground(RasterContext& ctx, const PatchSet& patches) {
+  ctx.rest_ground_slot.clear();
+  ctx.rest_ground.clear();
+  if (!ctx.hold || !ctx.options.rest_bound) return;
+  const std::size_t np = patches.patches.size();
+  std::vector<int32_t> slot(np, -1);
+  int32_t bound = 0;
+  for (std::size_t p = 0; p < np; ++p)
+    if ((patches.patches[p].at_rest || !ctx.options.mark_held) && patches.patches[p].held.size() == kHeldWords)
+      slot[p] = bound++;
+  if (bound == 0) return;
+  ctx.rest_ground.resize(std::size_t(bound) * kHeldWords);
+  const double texel_uv = ctx.options.held_texel > 0 ? 0.5 * ctx.options.held_texel : ctx.held_reach;
+  const int reach = rest_reach_cells(texel_uv);
+  parallel_for(np, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p)
+      if (slot[p] >= 0)
+        grow_cells(patches.patches[p].held.data(), reach, &ctx.rest_ground[std::size_t(slot[p]) * kHeldWords]);
+  }, 64);
+  ctx.rest_ground_slot = std::move(slot);
 }
 
 // The length of the gradient in uv of w interpolated over a patch triangle.
@@ -115,6 +189,7 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec
   Bary b;
   if (!b.init(P)) return;
   const double slope = ctx.hold ? weight_slope(uv, w) : 0;
+  const uint64_t* ground = rest_ground(ctx, std::size_t(key >> 32));
   const int x0 = std::max(cx0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
   const int x1 = std::min(cx1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
   const int y0 = std::max(cy0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
@@ -133,7 +208,7 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec
       const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
-      if (!passes(ctx, patch, u, v, wt, slope)) continue;
+      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, slope)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
@@ -489,6 +564,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
                       std::size_t count, std::vector<int32_t>& local, uint8_t* leaky, RasterCounters& counters) {
   PixelBox box = joint_box(tris, count);
   if (box.empty()) return;
+  const uint64_t* ground = rest_ground(ctx, patch_index);
   const int chart = tris[0].chart;
   const auto& tri_of = ctx.atlas.texels.triangle;
   const auto& chart_of = ctx.atlas.chart_of_triangle;
@@ -612,7 +688,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
-      if (!passes(ctx, patch, u, v, wt, t.slope)) continue;
+      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, t.slope)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
@@ -852,6 +928,7 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   const std::size_t np = patches.patches.size();
   if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize: too many patches");
   if (ctx.mode == RasterMode::Blend) ctx.blend.contributed.assign(np, 0);
+  bind_rest_ground(ctx, patches);
   // Every patch triangle, any order (the atomic min decides).
   std::vector<RasterCounters> counters(np);
   // All threads go through the patches from the oldest to the youngest, a
@@ -963,16 +1040,6 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
             inside(double(cu) / R, double(cv + 1) / R) && inside(double(cu + 1) / R, double(cv + 1) / R))
           set(cu, cv);
   };
-  auto interior_texel = [&](std::size_t i, int x, int y) {
-    const int chart = atlas.chart_of_triangle[tm.triangle[i]];
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int xx = x + dx, yy = y + dy;
-        const int32_t n = xx < 0 || yy < 0 || xx >= N || yy >= N ? -1 : ctx.index[std::size_t(yy) * N + xx];
-        if (n < 0 || atlas.chart_of_triangle[tm.triangle[n]] != chart) return false;
-      }
-    return true;
-  };
   constexpr int kWinnerCacheBits = 11;
   static std::atomic<uint64_t> generations{0};
   const uint64_t generation = ++generations;
@@ -1043,7 +1110,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i] ||
                        (patch.at_rest && !ctx.closed.empty() && ctx.closed[i] &&
                         !held_test_keeps(ctx, patch, t, u, v, w))) &&
-              interior_texel(i, x, y))
+              interior_texel(ctx, i, x, y))
             mark_held(p, u, v, cur->ux, cur->uy);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
         }

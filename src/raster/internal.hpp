@@ -98,6 +98,12 @@ struct RasterContext {
   std::size_t newborn_from = std::numeric_limits<std::size_t>::max();
   ErosionMap held_erosion;
   double held_reach = 0;
+  /// RasterOptions::rest_bound: per patch index, the slot of its cells in
+  /// `rest_ground` (-1: not bound: outside a render a patch that moves, or
+  /// one with no held cell), and there kHeldWords words per bound patch: its
+  /// held cells grown by rest_reach_cells, where alone it may win a texel.
+  std::vector<int32_t> rest_ground_slot;
+  std::vector<uint64_t> rest_ground;
   /// Per fluid triangle: the map of to_pixels.
   std::vector<TrianglePixelMap> pixel_map;
   /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).

@@ -498,6 +498,41 @@ TEST(Eval, SettlingDropAtRestKeepsItsPatches) {
   EXPECT_GT(paper_born, 0u) << "the settling must erode the paper's patches, or this test shows nothing";
 }
 
+TEST(Eval, ViscousDropAtRestMeetsTheRestTargets) {
+  // Issue 12's rest targets on the shared viscous_drop, baked from frame 58
+  // as docs/temporal.md measures it, at 1024^2 with --min-speed 0.05 (from
+  // frame 60 every vertex is below it, yet the puddle keeps spreading by
+  // 1-2 mm a frame and is re-meshed every frame): no birth, the same
+  // patches alive, under 0.5% of the rest surface changed (drift at fixed
+  // points) and popping under 0.1% on every frame. Popping was 0.11-0.13% on
+  // frames 65, 70 and 71 before RasterOptions::rest_bound, at the rim, where
+  // a resting patch's far edge reached over the newly uncovered strip.
+  const std::filesystem::path data =
+      std::filesystem::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
+  if (!std::filesystem::exists(data / "viscous_drop.0072.ply"))
+    GTEST_SKIP() << "../shared/data/viscous_drop is not present";
+  TempDir out("eval_viscous_rest");
+  BakeOptions o = test::small_pebbles_bake(data.string(), out.str());
+  o.mesh_pattern = (data / "viscous_drop.%04d.ply").string();
+  o.frames = FrameRange{58, 72};
+  o.min_speed = 0.05;
+  o.atlas.resolution = 1024;
+  o.patch.radius = 0;  // automatic, as `lapflow bake` (about 1500 patches)
+  run_bake(o);
+  const EvalReport r = evaluate_bake(out.str());
+  ASSERT_EQ(r.frames.size(), 15u);
+  ASSERT_TRUE(r.frames[0].alive.has_value());
+  for (std::size_t k = 1; k < r.frames.size(); ++k) {
+    const FrameMetrics& m = r.frames[k];
+    ASSERT_TRUE(m.born.has_value() && m.alive.has_value());
+    EXPECT_EQ(*m.born, 0u) << "frame " << m.frame;
+    EXPECT_EQ(*m.alive, *r.frames[0].alive) << "frame " << m.frame;
+    EXPECT_LE(m.drift, 0.005) << "frame " << m.frame;
+    EXPECT_LE(m.popping, 0.001) << "frame " << m.frame;
+    EXPECT_EQ(m.coverage, 1.0) << "frame " << m.frame;
+  }
+}
+
 TEST(Eval, SameNumbersForOneAndTwoThreadsAndOwnExemplarIsClosest) {
   TempDir in("eval_threads_in"), out("eval_threads_out");
   write_sphere_sequence(in.str(), 2, {0.6, 0, 0.2});

@@ -49,27 +49,47 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
 // A bake's advection rule reaches the tools that advect again from its
 // manifest (the replay bench); a manifest written before the rule existed
 // means the bake removed those vertices.
-TEST(BakeManifest, ThroughFlowReadsBackAndIsOffForOlderManifests) {
-  BakeOptions o;
-  o.name = "shot";
-  o.out_dir = "/tmp";
-  o.mesh_pattern = "sim/fluid.%04d.ply";
-  o.patch.radius = 0.04;
-  for (const bool on : {true, false}) {
-    o.advect.through_flow = on;
-    const BakeManifest m = make_bake_manifest(o, {1, 2});
-    EXPECT_EQ(m.settings.at("advect_through_flow"), on ? "true" : "false");
-    EXPECT_EQ(bake_options_from_manifest(m).advect.through_flow, on);
-  }
-  BakeManifest old = make_bake_manifest(o, {1, 2});
-  old.settings.erase("advect_through_flow");
-  EXPECT_FALSE(bake_options_from_manifest(old).advect.through_flow);
-  old.settings["advect_through_flow"] = "maybe";
-  try {
-    bake_options_from_manifest(old);
-    ADD_FAILURE() << "a malformed setting must be an InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("settings.advect_through_flow: 'maybe'"), std::string::npos) << e.what();
+// Rules added after manifests were first written (--through-flow, stop 29;
+// --rest-bound, stop 30) read back, and a manifest written before one reads
+// as that rule off, so --resume and the render of an older bake decide as
+// that bake did.
+TEST(BakeManifest, LaterRulesReadBackAndAreOffForOlderManifests) {
+  struct Rule {
+    const char* key;
+    bool& (*of)(BakeOptions&);
+  };
+  const Rule rules[] = {
+      {"advect_through_flow", [](BakeOptions& o) -> bool& { return o.advect.through_flow; }},
+      {"rest_bound", [](BakeOptions& o) -> bool& { return o.raster.rest_bound; }},
+  };
+  for (const Rule& rule : rules) {
+    SCOPED_TRACE(rule.key);
+    BakeOptions o;
+    o.name = "shot";
+    o.out_dir = "/tmp";
+    o.mesh_pattern = "sim/fluid.%04d.ply";
+    o.patch.radius = 0.04;
+    EXPECT_TRUE(rule.of(o)) << "on by default";
+    for (const bool on : {true, false}) {
+      rule.of(o) = on;
+      const BakeManifest m = make_bake_manifest(o, {1, 2});
+      EXPECT_EQ(m.settings.at(rule.key), on ? "true" : "false");
+      BakeOptions back = bake_options_from_manifest(m);
+      EXPECT_EQ(rule.of(back), on);
+    }
+    rule.of(o) = true;
+    BakeManifest old = make_bake_manifest(o, {1, 2});
+    old.settings.erase(rule.key);
+    BakeOptions back = bake_options_from_manifest(old);
+    EXPECT_FALSE(rule.of(back));
+    old.settings[rule.key] = "maybe";
+    try {
+      bake_options_from_manifest(old);
+      ADD_FAILURE() << "a malformed setting must be an InputError";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("settings.") + rule.key + ": 'maybe'"), std::string::npos)
+          << e.what();
+    }
   }
 }
 

@@ -226,3 +226,63 @@ TEST(RasterPipeline, HoldKeepsAStillSurfaceIdentical) {
 
 }  // namespace
 }  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// RasterOptions::rest_bound: a patch at rest wins no texel beyond the cells
+// it held (grown by rest_reach_cells). Frame 0 marks the held cells; then
+// every patch is at rest and one patch keeps only the cells of a disc
+// around its centre: on frame 1 it shows its texture nowhere beyond the
+// disc (other patches, or the ones closing the hole, take that surface),
+// while without the rule it keeps winning its whole eroded shape. Coverage
+// stays full either way.
+TEST(RasterPipeline, RestBoundKeepsAPatchAtRestToTheCellsItHeld) {
+  auto frame1 = [](bool rest_bound, uint32_t& id, std::size_t& beyond, std::size_t& uncovered) {
+    SphereScene sc(256);
+    sc.ropt.hold = true;
+    sc.ropt.rest_bound = rest_bound;
+    SurfaceQuery q(sc.mesh);
+    PatchSet patches = sc.seeded(q);
+    raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+    // The patch that won the most cells.
+    std::size_t best = 0, most = 0;
+    for (std::size_t p = 0; p < patches.patches.size(); ++p) {
+      std::size_t n = 0;
+      for (uint64_t w : patches.patches[p].held) n += std::size_t(__builtin_popcountll(w));
+      if (n > most) most = n, best = p;
+    }
+    constexpr double kDisc = 0.15;  // in uv, around (0.5, 0.5)
+    Patch& a = patches.patches[best];
+    id = a.id;
+    for (int cv = 0; cv < kHeldCells; ++cv)
+      for (int cu = 0; cu < kHeldCells; ++cu)
+        if (std::hypot((cu + 0.5) / kHeldCells - 0.5, (cv + 0.5) / kHeldCells - 0.5) > kDisc) {
+          const std::size_t bit = std::size_t(cv) * kHeldCells + std::size_t(cu);
+          a.held[bit >> 6] &= ~(uint64_t(1) << (bit & 63));
+        }
+    for (Patch& p : patches.patches) p.at_rest = true;
+    const FrameTextures f = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+    beyond = uncovered = 0;
+    // The disc grown by the reach and the diagonal of a cell.
+    const double texel_uv = f.stats.texel_world_size / (2 * sc.ropt.radius);
+    const double reach = kDisc + (rest_reach_cells(texel_uv) + 1.5) / kHeldCells;
+    for (std::size_t k = 0; k < sc.atlas.texels.size(); ++k) {
+      const float* t = &f.aov.pixels[std::size_t(sc.atlas.texels.texel[k]) * 4];
+      uncovered += t[0] < 0;
+      if (t[0] == float(a.id) && std::hypot(t[1] - 0.5, t[2] - 0.5) > reach) ++beyond;
+    }
+  };
+  uint32_t id_on = 0, id_off = 0;
+  std::size_t beyond_on = 0, beyond_off = 0, uncovered_on = 0, uncovered_off = 0;
+  frame1(true, id_on, beyond_on, uncovered_on);
+  frame1(false, id_off, beyond_off, uncovered_off);
+  ASSERT_EQ(id_on, id_off);
+  EXPECT_EQ(uncovered_on, 0u);
+  EXPECT_EQ(uncovered_off, 0u);
+  EXPECT_GT(beyond_off, 100u) << "without the rule the patch must win beyond its disc, or this test shows nothing";
+  EXPECT_EQ(beyond_on, 0u);
+}
+
+}  // namespace
+}  // namespace lapflow

@@ -2,6 +2,7 @@
 /// \file patches.hpp Deformable texture patches (ALGORITHM.md steps 1-5): the
 /// Lagrangian half of the paper. Each stage is a free function over plain data.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -54,12 +55,25 @@ struct Patch {
 inline constexpr int kHeldCells = 128;
 inline constexpr std::size_t kHeldWords = std::size_t(kHeldCells) * kHeldCells / 64;
 
+/// How far, in cells of Patch::held (r/64), a bound patch may win texels
+/// beyond the cells it held (RasterOptions::rest_bound), when the cells were
+/// marked by texels spanning `texel_uv` of the uv square: two such texels.
+/// Marks cover a won region but for a band about a cell wide along its
+/// borders (a new sampling of the surface), and a chart's outer texels do
+/// not mark at all (passes exempts the texels next to a chart's border).
+inline int rest_reach_cells(double texel_uv) {
+  return std::max(2, int(std::ceil(2 * std::min(texel_uv, 1.0) * kHeldCells - 1e-9)));
+}
+
 /// True when (u, v) lies in a cell of `held` (kHeldWords words, or empty).
-inline bool held_at(const std::vector<uint64_t>& held, double u, double v) {
-  if (held.empty() || !(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;
+inline bool held_at(const uint64_t* cells, double u, double v) {
+  if (!(u >= 0 && u <= 1 && v >= 0 && v <= 1)) return false;
   const int cu = std::min(int(u * kHeldCells), kHeldCells - 1), cv = std::min(int(v * kHeldCells), kHeldCells - 1);
   const std::size_t bit = std::size_t(cv) * kHeldCells + std::size_t(cu);
-  return (held[bit >> 6] >> (bit & 63)) & 1u;
+  return (cells[bit >> 6] >> (bit & 63)) & 1u;
+}
+inline bool held_at(const std::vector<uint64_t>& held, double u, double v) {
+  return !held.empty() && held_at(held.data(), u, v);
 }
 
 /// Patches in stack order: oldest first (birth_frame, then id). The rasterizer

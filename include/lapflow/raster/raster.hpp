@@ -70,6 +70,21 @@ struct RasterOptions {
   /// gives bit-identical frames. false = the paper's memoryless test.
   bool hold = true;
   double hold_margin = 0.05;
+  /// The hold's other half: a patch at rest (Patch::at_rest), and in a
+  /// render (mark_held false) every patch, wins no texel farther than
+  /// rest_reach_cells(held_texel) from the cells it held (Patch::held), but
+  /// next to a chart's border; such texels go to other patches or are
+  /// closed by the ones around them. Where a still liquid's rim spreads, the
+  /// new strip then continues the patch beside it rather than whichever
+  /// patch's far edge happens to reach over the rim (a hand-over between
+  /// resting patches, seen as popping), and a render shows a patch only
+  /// where the tracking did, so a still liquid stays still from its first
+  /// frame. Needs `hold`. false = a patch wins wherever its erosion test
+  /// passes. docs/temporal.md.
+  bool rest_bound = true;
+  /// Size in r of the texels that marked Patch::held (the tracking atlas's,
+  /// BakeOptions::track_texel); 0 = this atlas's own texels.
+  double held_texel = 0;
   /// Retire ("merge") a patch that won fewer texels than this fraction of
   /// pi r^2 (in texels) when other patches pass the erosion test on every one
   /// of them, so they take them over on the next frame. 0 = off (the paper
@@ -83,6 +98,7 @@ struct RasterOptions {
     small_hole = 0.0;
     rest_hole = 0.0;
     hold = false;
+    rest_bound = false;
     merge = 0.0;
   }
 };
