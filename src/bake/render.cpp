@@ -60,6 +60,12 @@ class Settings {
     if (n < 0 || n >= count) bad(key, std::to_string(n), "one of the known values");
     value = Enum(n);
   }
+  /// A rule added after the first manifests: on when the manifest says so,
+  /// off when the manifest predates it (the bake that wrote it ran without).
+  void read_later_rule(const std::string& key, bool& value) const {
+    value = false;
+    read(key, value);
+  }
   const std::string* find(const std::string& key) const {
     const auto at = m_.settings.find(key);
     return at == m_.settings.end() ? nullptr : &at->second;
@@ -131,15 +137,13 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   s.read("advect_max_step_fraction", o.advect.max_step_fraction);
   s.read("advect_max_turn", o.advect.max_turn);
   s.read("advect_max_projection", o.advect.max_projection);
-  if (!s.find("advect_through_flow")) o.advect.through_flow = false;  // a bake before stop 29 removed those vertices
-  s.read("advect_through_flow", o.advect.through_flow);
+  s.read_later_rule("advect_through_flow", o.advect.through_flow);  // stop 29
   s.read("center_radius", o.weights.center_radius);
   s.read("gutter", o.atlas.gutter);
   s.read("max_stretch", o.atlas.max_stretch);
   s.read("fill_holes", o.raster.fill_holes);
   s.read("retire", o.raster.retire);
-  if (!s.find("rest_bound")) o.raster.rest_bound = false;  // a bake before stop 30 let patches at rest win anywhere
-  s.read("rest_bound", o.raster.rest_bound);
+  s.read_later_rule("rest_bound", o.raster.rest_bound);  // stop 30
   s.read("mipmap", o.raster.mipmap);
   s.read("trilinear", o.raster.trilinear);
   s.read("dilate", o.raster.dilate);
