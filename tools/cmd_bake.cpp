@@ -93,6 +93,7 @@ void run_bake(BakeCli& c) {
     o.raster.use_paper_hole_filling();
     o.patch.anticipate = 0;
     o.advect.through_flow = false;
+    o.advect.run_off = false;
   }
   o.keep_states = parse_keep_states(c.keep_states);
   if (o.track_only) o.keep_states = -1;  // render needs every frame's
@@ -257,6 +258,12 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                    "tangential part of the step instead of being cut away there and born again every frame (on by "
                    "default; --no-through-flow: removed, as in the paper; docs/temporal.md)")
           ->group("Patches");
+  CLI::Option* run_off =
+      cmd.add_flag("--run-off,!--no-run-off", o.advect.run_off,
+                   "Where the liquid runs off the edge of its surface (leaving the domain at an open end), the "
+                   "texture goes over the edge with it instead of being cut away or piled up before the edge (on by "
+                   "default; --no-run-off: removed or projected onto the edge, as in the paper; docs/temporal.md)")
+          ->group("Patches");
   CLI::Option* anticipate =
       cmd.add_option("--anticipate", o.patch.anticipate,
                      "New patches are born deformed against the flow they will meet (predicted as if the flow were "
@@ -317,7 +324,7 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
   cmd.add_flag("--paper", c.paper,
                "The paper's patches, hole filling and retirement as published, for comparisons: conformal new "
                "patches, every hole a new patch, no hysteresis, only patches that won nothing retire (= "
-               "--anticipate 0 --no-through-flow --small-hole 0 --rest-hole 0 --no-hold --no-rest-bound --merge 0). The "
+               "--anticipate 0 --no-through-flow --no-run-off --small-hole 0 --rest-hole 0 --no-hold --no-rest-bound --merge 0). The "
                "population then grows on steady flow "
                "and a still liquid keeps churning (docs/temporal.md)")
       ->excludes(small_hole)
@@ -327,6 +334,7 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
       ->excludes(merge)
       ->excludes(anticipate)
       ->excludes(through_flow)
+      ->excludes(run_off)
       ->group("Erosion");
   cmd.add_option("--mode", c.mode,
                  "erosion (the paper), blend (the 2019 baseline: every covering patch alpha-blended by its weight; "

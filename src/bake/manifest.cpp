@@ -137,6 +137,7 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   s["advect_max_turn"] = text(o.advect.max_turn);
   s["advect_max_projection"] = text(o.advect.max_projection);
   s["advect_through_flow"] = text(o.advect.through_flow);
+  s["advect_run_off"] = text(o.advect.run_off);
   s["center_radius"] = text(o.weights.center_radius);
   s["gutter"] = text(o.atlas.gutter);
   s["max_stretch"] = text(o.atlas.max_stretch);

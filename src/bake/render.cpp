@@ -62,8 +62,9 @@ class Settings {
   }
   /// A rule added after the first manifests: on when the manifest says so,
   /// off when the manifest predates it (the bake that wrote it ran without).
-  void read_later_rule(const std::string& key, bool& value) const {
-    value = false;
+  template <class T>
+  void read_later_rule(const std::string& key, T& value) const {
+    value = T(0);
     read(key, value);
   }
   const std::string* find(const std::string& key) const {
@@ -138,6 +139,7 @@ BakeOptions bake_options_from_manifest(const BakeManifest& m) {
   s.read("advect_max_turn", o.advect.max_turn);
   s.read("advect_max_projection", o.advect.max_projection);
   s.read_later_rule("advect_through_flow", o.advect.through_flow);  // stop 29
+  s.read_later_rule("advect_run_off", o.advect.run_off);             // stop 31
   s.read("center_radius", o.weights.center_radius);
   s.read("gutter", o.atlas.gutter);
   s.read("max_stretch", o.atlas.max_stretch);

@@ -26,6 +26,11 @@ namespace {
 
 constexpr int kMaxSubsteps = 64;
 constexpr double kNearFraction = 1.0 / 16;  // first projection radius, as a fraction of max_projection * r
+// Run-off (AdvectOptions::run_off): how far from the surface a vertex past its
+// edge is kept, as a fraction of r (docs/temporal.md, "Run-off edges": 0.25
+// is the projection's reach and keeps nothing; 1 pops a little less on
+// channel but lets p99 distortion over 3 on three frames).
+constexpr double kRunOffReach = 0.5;
 
 struct Moved {
   Vec3 position;
@@ -41,6 +46,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
   AdvectStats stats;
   const double r = patch_options.radius, dt = options.dt;
   const double max_proj = options.max_projection * r;
+  const double run_off_reach = options.run_off ? kRunOffReach * r : 0.0;
   const std::size_t np = patches.patches.size();
   // Vertices of all patches, then one centre per patch, in one index space.
   std::vector<std::size_t> offset(np + 1, 0);
@@ -100,23 +106,31 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     if (h.distance <= on_surface) h.point = from;
     return h;
   };
-  // A vertex whose step leaves the surface while the surface stays where it
-  // was: the liquid crosses its surface there (an outflow or inflow face, or
-  // a velocity the mesh does not follow). The step's part along the normal
-  // cannot be followed, so the vertex takes its tangential part, or stays
-  // where it was when that slides off the surface too; found = false
-  // otherwise (the surface moved away, or the step runs along it off an
-  // edge: the vertex left with the liquid).
+  // A vertex whose step leaves the surface (farther than max_proj) while the
+  // surface is still where the vertex was. Along the surface's normal, the
+  // liquid crosses its surface there (an outflow or inflow face, or a
+  // velocity the mesh does not follow): that part of the step cannot be
+  // followed, so with `through_flow` the vertex takes its tangential part, or
+  // stays where it was when that slides off the surface too. Along the
+  // surface, the step ran off its edge with the liquid (an open end of the
+  // domain): with `run_off` the vertex keeps its advected position, off the
+  // surface, if that is within run_off_reach of it (`off_edge`). Otherwise, or
+  // when the surface moved away, found = false: the vertex is removed.
   const TriMesh& next_mesh = next.mesh();
-  auto across = [&](const Vec3& x0, const Vec3& step) {
+  auto leave = [&](const Vec3& x0, const Vec3& x, bool& off_edge) {
+    off_edge = false;
     const ClosestHit here = settle(next.closest(x0, max_proj), x0);
     if (!(here.found && here.distance <= max_proj)) return ClosestHit{};
     const Vec3 n2 = triangle_normal_area2(next_mesh, here.triangle);
     const double l = norm(n2);
     if (!(l > 0)) return ClosestHit{};
-    const Vec3 n = n2 / l;
+    const Vec3 n = n2 / l, step = x - x0;
     const double along_normal = dot(step, n);
-    if (!(std::abs(along_normal) > max_proj)) return ClosestHit{};
+    if (!(std::abs(along_normal) > max_proj)) {
+      off_edge = run_off_reach > 0 && next.closest(x, run_off_reach).found;
+      return ClosestHit{};
+    }
+    if (!options.through_flow) return ClosestHit{};
     const Vec3 to = here.point + (step - n * along_normal);
     const ClosestHit slid = settle(next.closest(to, max_proj), to);
     return slid.found && slid.distance <= max_proj ? slid : here;
@@ -135,6 +149,9 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
         x = patches.patches[i - nverts].center;
       }
       const Vec3 x0 = x;
+      // Past the surface's edge since an earlier frame (run_off).
+      const bool was_off = i < nverts && prev_triangle < 0 &&
+                           patches.patches[p].surface_triangle.size() == patches.patches[p].positions.size();
       x = advect(x, prev_triangle);
       Moved& m = moved[i];
       m.position = x;
@@ -147,8 +164,16 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       ClosestHit hit = next.closest(x, kNearFraction * max_proj);
       if (!hit.found) hit = next.closest(x, max_proj);
       hit = settle(hit, x);
-      if (!(hit.found && hit.distance <= max_proj) && options.through_flow && i < nverts) hit = across(x0, x - x0);
-      if (hit.found && hit.distance <= max_proj) {
+      bool off_edge = false;
+      if (!(hit.found && hit.distance <= max_proj) && i < nverts) {
+        if (was_off)  // past the edge since an earlier frame: it goes on while the surface is near
+          off_edge = run_off_reach > 0 && next.closest(x, run_off_reach).found;
+        else if (options.through_flow || run_off_reach > 0)
+          hit = leave(x0, x, off_edge);
+      }
+      if (off_edge) {
+        m.kept = true;  // at its advected position, off the surface (triangle -1)
+      } else if (hit.found && hit.distance <= max_proj) {
         m.position = hit.point;
         m.triangle = hit.triangle;
         m.kept = true;
@@ -174,6 +199,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       if (is_finite(c.position)) patch.center = c.position;
 
       auto residual = [&](std::size_t v) {
+        if (mv[v].triangle < 0) return 0.0;  // off the surface's edge
         const Tri& f = mesh.triangles[mv[v].triangle];
         const Vec3& a = mesh.positions[f[0]];
         return norm(closest_point_on_triangle(mv[v].position, a, mesh.positions[f[1]], mesh.positions[f[2]]).point -

@@ -46,11 +46,8 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   EXPECT_THROW(parse_raster_mode("fade"), UsageError);
 }
 
-// A bake's advection rule reaches the tools that advect again from its
-// manifest (the replay bench); a manifest written before the rule existed
-// means the bake removed those vertices.
 // Rules added after manifests were first written (--through-flow, stop 29;
-// --rest-bound, stop 30) read back, and a manifest written before one reads
+// --rest-bound, stop 30; --run-off, stop 31) read back, and a manifest written before one reads
 // as that rule off, so --resume and the render of an older bake decide as
 // that bake did.
 TEST(BakeManifest, LaterRulesReadBackAndAreOffForOlderManifests) {
@@ -61,6 +58,7 @@ TEST(BakeManifest, LaterRulesReadBackAndAreOffForOlderManifests) {
   const Rule rules[] = {
       {"advect_through_flow", [](BakeOptions& o) -> bool& { return o.advect.through_flow; }},
       {"rest_bound", [](BakeOptions& o) -> bool& { return o.raster.rest_bound; }},
+      {"advect_run_off", [](BakeOptions& o) -> bool& { return o.advect.run_off; }},
   };
   for (const Rule& rule : rules) {
     SCOPED_TRACE(rule.key);

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <array>
+#include <map>
 #include <memory>
 #include <set>
 
@@ -322,6 +324,107 @@ TEST(PatchesAdvect, ThroughFlowLeavesOtherLossesAlone) {
   const VelocityField still = [](const Vec3&) { return Vec3{}; };
   PatchSet c = start;
   EXPECT_EQ(advect_patches(away, still, still, po, on, c).patches_removed, 2u);
+}
+
+// Liquid leaving the domain over an open end: the step runs along the
+// surface and past its edge (x = 1). With run_off the texture goes over the
+// edge with the liquid: a vertex that lands farther than the projection's
+// reach (r/4) past the edge, but within r/2 of the surface, keeps exactly its
+// advected position off the surface, and the triangles around it stay; the
+// next frame it goes on with the flow while it is within r/2. Without it (the
+// paper) those vertices and their triangles are removed.
+TEST(PatchesAdvect, RunOffCarriesTheTextureOverTheEdge) {
+  const double r = 0.18, dt = 1.0 / 24;
+  const TriMesh plane = test::plane_grid(50, 50, 1.0, 1.0);
+  SurfaceQuery q(plane);
+  PatchOptions po;
+  po.radius = r;
+  PatchSet start;
+  auto p = create_patch(q, {{0.9, 0.5, 0}, {0, 0, 1}, -1}, start.next_id++, 0, po, {});
+  ASSERT_TRUE(p);
+  start.patches.push_back(std::move(*p));
+  const Vec3 step{0.125, 0, 0};  // 3 m/s: 12.5 cm a frame along the surface
+  const VelocityField along = [&](const Vec3&) { return step / dt; };
+  AdvectOptions on, off;
+  on.dt = off.dt = dt;
+  ASSERT_TRUE(on.run_off) << "the default";
+  off.run_off = false;
+  const Patch& a = start.patches[0];
+  auto index_of = [&](const Patch& b) {  // vertices are identified by their rest uv
+    std::map<std::pair<double, double>, std::size_t> at;
+    for (std::size_t v = 0; v < a.rest_uv.size(); ++v) at[{a.rest_uv[v].x, a.rest_uv[v].y}] = v;
+    std::vector<std::size_t> of(b.rest_uv.size());
+    for (std::size_t v = 0; v < b.rest_uv.size(); ++v) of[v] = at.at({b.rest_uv[v].x, b.rest_uv[v].y});
+    return of;
+  };
+  auto tris_of = [&](const Patch& b) {
+    const std::vector<std::size_t> of = index_of(b);
+    std::set<std::array<std::size_t, 3>> t;
+    for (const Tri& f : b.triangles) t.insert({of[f[0]], of[f[1]], of[f[2]]});
+    return t;
+  };
+
+  PatchSet carried = start;
+  advect_patches(q, along, along, po, on, carried);
+  ASSERT_EQ(carried.patches.size(), 1u);
+  const Patch& b = carried.patches[0];
+  const std::vector<std::size_t> of = index_of(b);
+  std::size_t past = 0;
+  for (std::size_t v = 0; v < of.size(); ++v) {
+    const Vec3 want = a.positions[of[v]] + step;
+    if (b.surface_triangle[v] < 0) {
+      ++past;
+      EXPECT_EQ(b.positions[v].x, want.x) << "vertex " << v;
+      EXPECT_EQ(b.positions[v].y, want.y);
+      EXPECT_GT(want.x, 1.0 + r / 4);
+      EXPECT_LE(want.x, 1.0 + r / 2 + 1e-12);
+    } else {
+      EXPECT_LE(b.positions[v].x, 1.0 + 1e-12);
+    }
+  }
+  EXPECT_GT(past, 10u) << "vertices must run past the edge, or this test shows nothing";
+  // Every triangle whose vertices all land within r/2 of the surface stays.
+  const auto kept = tris_of(b);
+  std::size_t beyond_reach = 0;
+  for (const Tri& f : a.triangles) {
+    double hi = -1e300;
+    for (int k = 0; k < 3; ++k) hi = std::max(hi, a.positions[f[k]].x + step.x);
+    const bool within = hi <= 1.0 + r / 2 - 1e-9;
+    EXPECT_EQ(kept.count({std::size_t(f[0]), std::size_t(f[1]), std::size_t(f[2])}) == 1, within);
+    beyond_reach += hi > 1.0 + r / 2 + 1e-9;
+  }
+  EXPECT_GT(beyond_reach, 0u);
+
+  // The next frame, slower: the vertices past the edge go on exactly with the
+  // flow while they are within r/2 of the surface, and are removed beyond.
+  const Vec3 slow{0.02, 0, 0};
+  const VelocityField on_ = [&](const Vec3&) { return slow / dt; };
+  PatchSet next = carried;
+  advect_patches(q, on_, on_, po, on, next);
+  ASSERT_EQ(next.patches.size(), 1u);
+  const Patch& c = next.patches[0];
+  const std::vector<std::size_t> of2 = index_of(c);
+  std::size_t went_on = 0;
+  for (std::size_t v = 0; v < of2.size(); ++v)
+    if (c.surface_triangle[v] < 0) {
+      ++went_on;
+      EXPECT_EQ(c.positions[v].x, a.positions[of2[v]].x + step.x + slow.x);
+      EXPECT_LE(c.positions[v].x, 1.0 + r / 2 + 1e-12);
+    }
+  EXPECT_GT(went_on, 0u);
+  EXPECT_LT(went_on, past) << "some must have gone beyond r/2";
+
+  // The paper's rule: nothing off the surface, and fewer triangles.
+  PatchSet cut = start;
+  advect_patches(q, along, along, po, off, cut);
+  ASSERT_EQ(cut.patches.size(), 1u);
+  for (std::size_t v = 0; v < cut.patches[0].positions.size(); ++v) {
+    EXPECT_GE(cut.patches[0].surface_triangle[v], 0);
+    EXPECT_LE(cut.patches[0].positions[v].x, 1.0 + 1e-12);
+  }
+  const auto kept_off = tris_of(cut.patches[0]);
+  EXPECT_LT(kept_off.size(), kept.size());
+  for (const auto& t : kept_off) EXPECT_TRUE(kept.count(t)) << "run-off keeps every triangle the paper keeps";
 }
 
 TEST(PatchesWeights, FoldedTriangleHasZeroQuality) {

@@ -157,6 +157,15 @@ struct AdvectOptions {
   /// step instead of being removed. Off: removed, as in the paper.
   /// docs/temporal.md, "Through-flow faces".
   bool through_flow = true;
+  /// Where the liquid runs off the edge of its surface (liquid leaving the
+  /// domain at an open end: a step along the surface that ends farther than
+  /// max_projection from it, while the surface is still where the vertex
+  /// was), the vertex keeps its advected position off the surface
+  /// (surface_triangle -1) and goes on with the flow while it stays within
+  /// r / 2 of the surface, so its triangles still cover the surface before
+  /// the edge instead of being cut away there. Off: removed, as in the paper.
+  /// docs/temporal.md, "Run-off edges".
+  bool run_off = true;
 };
 
 struct WeightOptions {
