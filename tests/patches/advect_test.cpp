@@ -291,21 +291,25 @@ TEST(PatchesAdvect, ThroughFlowFaceKeepsItsTextureWithTheTangentialStep) {
   EXPECT_TRUE(removed.patches.empty());
 }
 
+// Patches created on `q` at the given centres (facing +z), ids 0, 1, ...
+static PatchSet patches_at(const SurfaceQuery& q, const PatchOptions& po, std::initializer_list<Vec3> centres) {
+  PatchSet set;
+  for (const Vec3& c : centres)
+    if (auto p = create_patch(q, {c, {0, 0, 1}, -1}, set.next_id++, 0, po, {})) set.patches.push_back(std::move(*p));
+  return set;
+}
+
 // Only a crossing counts: a step that runs along the surface off its edge, or
-// a surface that moved away, still removes the vertices, with or without the
-// rule.
+// a surface that moved away, is left to the other rules (run-off, removal),
+// the same with or without this one.
 TEST(PatchesAdvect, ThroughFlowLeavesOtherLossesAlone) {
   const double r = 0.18, dt = 1.0 / 24;
   const TriMesh plane = test::plane_grid(50, 50, 1.0, 1.0);
   SurfaceQuery q(plane);
   PatchOptions po;
   po.radius = r;
-  PatchSet start;
-  for (const Vec3& c : {Vec3{0.9, 0.5, 0}, Vec3{0.4, 0.5, 0}}) {
-    auto p = create_patch(q, {c, {0, 0, 1}, -1}, start.next_id++, 0, po, {});
-    ASSERT_TRUE(p);
-    start.patches.push_back(std::move(*p));
-  }
+  const PatchSet start = patches_at(q, po, {{0.9, 0.5, 0}, {0.4, 0.5, 0}});
+  ASSERT_EQ(start.patches.size(), 2u);
   AdvectOptions on, off;
   on.dt = off.dt = dt;
   off.through_flow = false;
@@ -339,10 +343,8 @@ TEST(PatchesAdvect, RunOffCarriesTheTextureOverTheEdge) {
   SurfaceQuery q(plane);
   PatchOptions po;
   po.radius = r;
-  PatchSet start;
-  auto p = create_patch(q, {{0.9, 0.5, 0}, {0, 0, 1}, -1}, start.next_id++, 0, po, {});
-  ASSERT_TRUE(p);
-  start.patches.push_back(std::move(*p));
+  const PatchSet start = patches_at(q, po, {{0.9, 0.5, 0}});
+  ASSERT_EQ(start.patches.size(), 1u);
   const Vec3 step{0.125, 0, 0};  // 3 m/s: 12.5 cm a frame along the surface
   const VelocityField along = [&](const Vec3&) { return step / dt; };
   AdvectOptions on, off;
