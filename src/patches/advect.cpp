@@ -117,6 +117,9 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
   // surface, if that is within run_off_reach of it (`off_edge`). Otherwise, or
   // when the surface moved away, found = false: the vertex is removed.
   const TriMesh& next_mesh = next.mesh();
+  // run_off: a vertex off the surface goes on while the surface is within
+  // run_off_reach of it.
+  auto near_edge = [&](const Vec3& x) { return run_off_reach > 0 && next.closest(x, run_off_reach).found; };
   auto leave = [&](const Vec3& x0, const Vec3& x, bool& off_edge) {
     off_edge = false;
     const ClosestHit here = settle(next.closest(x0, max_proj), x0);
@@ -127,7 +130,7 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     const Vec3 n = n2 / l, step = x - x0;
     const double along_normal = dot(step, n);
     if (!(std::abs(along_normal) > max_proj)) {
-      off_edge = run_off_reach > 0 && next.closest(x, run_off_reach).found;
+      off_edge = near_edge(x);
       return ClosestHit{};
     }
     if (!options.through_flow) return ClosestHit{};
@@ -166,8 +169,8 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
       hit = settle(hit, x);
       bool off_edge = false;
       if (!(hit.found && hit.distance <= max_proj) && i < nverts) {
-        if (was_off)  // past the edge since an earlier frame: it goes on while the surface is near
-          off_edge = run_off_reach > 0 && next.closest(x, run_off_reach).found;
+        if (was_off)  // past the edge since an earlier frame
+          off_edge = near_edge(x);
         else if (options.through_flow || run_off_reach > 0)
           hit = leave(x0, x, off_edge);
       }
