@@ -12,9 +12,9 @@ namespace lapflow::cli {
 namespace {
 
 struct EvalCli {
-  std::string dir, exemplar, frames, json_path, plots_dir;
+  std::string dir, exemplar, frames, json_path, plots_dir, maps_dir;
   double min_speed = -1;
-  CLI::Option *json = nullptr, *plots = nullptr;
+  CLI::Option *json = nullptr, *plots = nullptr, *maps = nullptr;
 };
 
 void run_eval(EvalCli& c) {
@@ -32,6 +32,10 @@ void run_eval(EvalCli& c) {
   const bool json_to_stdout = c.json->count() > 0 && c.json_path.empty();
 
   const BakeManifest manifest = read_bake_manifest(c.dir);
+  if (c.maps->count() > 0)
+    o.maps_dir = c.maps_dir.empty()
+                     ? (std::filesystem::path(manifest.dir.empty() ? c.dir : manifest.dir) / (manifest.name + ".eval_maps")).string()
+                     : c.maps_dir;
   std::size_t frames = 0;
   for (int f : manifest.frames) frames += !o.frames || (f >= o.frames->first && f <= o.frames->last);
   info("lapflow eval: {} ({} mode), {} frames | {} threads", manifest.dir, manifest.mode, frames, thread_count_label());
@@ -51,6 +55,7 @@ void run_eval(EvalCli& c) {
       info("wrote {}", c.json_path);
     }
   }
+  if (!report.maps.empty()) info("wrote {} popping maps in {}", report.maps.size(), o.maps_dir);
   if (c.plots->count() > 0) {
     const std::string dir =
         c.plots_dir.empty() ? (std::filesystem::path(report.dir) / (report.name + ".eval_plots")).string() : c.plots_dir;
@@ -87,6 +92,11 @@ void add_eval_command(CLI::App& app) {
                             "Write one PNG per metric over the frames with gnuplot into DIR (default: "
                             "DIR/NAME.eval_plots)")
                 ->expected(0, 1);
+  c.maps = cmd->add_option("--maps", c.maps_dir,
+                           "Write a popping map per frame into DIR (default: DIR/NAME.eval_maps): NAME.popping.N.exr "
+                           "in the frame's atlas layout, R popped to a newborn patch, G popped to an older patch, B "
+                           "kept, A compared")
+               ->expected(0, 1);
   cmd->add_option("--min-speed", c.min_speed, "Rest threshold in m/s for drift (default: the bake's --min-speed)");
   add_global_options(*cmd);
   cmd->callback([] { run_eval(c); });

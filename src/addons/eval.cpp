@@ -726,7 +726,12 @@ void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSet
   m.drift = t.compared ? double(t.changed) / double(t.compared) : kNoValue;
 }
 
-void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m) {
+// What a chart texel of the current frame was in the popping count
+// (pair_metrics), as a popping map shows it.
+enum class PopKind : uint8_t { NotCompared, Kept, PoppedToOlder, PoppedToNewborn };
+
+void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m,
+                  std::vector<PopKind>* kinds = nullptr) {
   const std::size_t count = cur.texels.size();
   const double two_r = 2 * s.radius;
   // One texel of the previous frame in patch (u,v) units; matches are
@@ -781,6 +786,7 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   // frame's atlas was born on this frame.
   int32_t newest_prev = -1;
   for (const int32_t id : prev.patch) newest_prev = std::max(newest_prev, id);
+  if (kinds) kinds->assign(count, PopKind::NotCompared);
   const double reach = 2 * s.radius;
   const double drift_tolerance = 0.5 * uv_texel;
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
@@ -795,10 +801,12 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
       const bool other_patch = prev.patch[j] != cur.patch[i], popped = other_patch && !matched[i];
       ++p.compared;
       p.w += w;
+      const bool born = cur.patch[i] > newest_prev;
       if (popped) {
         p.w_popped += w;
-        if (cur.patch[i] > newest_prev) p.w_popped_born += w;
+        if (born) p.w_popped_born += w;
       }
+      if (kinds) (*kinds)[i] = !popped ? PopKind::Kept : born ? PopKind::PoppedToNewborn : PopKind::PoppedToOlder;
       if (norm(v) <= s.rest_speed) {
         ++p.rest;
         bool changed = other_patch;
@@ -870,6 +878,24 @@ std::map<int, Population> read_population(const BakeManifest& m) {
     }
   }
   return out;
+}
+
+/// The popping map of `cur` (EvalOptions::maps_dir): RGBA half in the
+/// frame's atlas layout, written atomically.
+std::string write_popping_map(const BakeManifest& m, const FrameData& cur, const std::vector<PopKind>& kinds,
+                              const std::string& dir) {
+  Image img(cur.n, cur.n, 4);
+  for (std::size_t i = 0; i < kinds.size(); ++i) {
+    if (kinds[i] == PopKind::NotCompared) continue;
+    float* px = &img.pixels[std::size_t(cur.texels.texel[i]) * 4];
+    px[0] = kinds[i] == PopKind::PoppedToNewborn;
+    px[1] = kinds[i] == PopKind::PoppedToOlder;
+    px[2] = kinds[i] == PopKind::Kept;
+    px[3] = 1;
+  }
+  const std::string path = (fs::path(dir) / fs::path(m.frame_file("popping", cur.frame)).filename()).string();
+  write_exr(path, img, {"R", "G", "B", "A"});
+  return path;
 }
 
 // ---- the metrics as a list, for the summary, JSON, table and plots ----------
@@ -957,6 +983,12 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   ExemplarAtScale exemplar(read_image(report.exemplar));
   report.exemplar_luminance_std = exemplar_stats(exemplar.original()).luminance_std;
   const auto population = read_population(m);
+  if (!o.maps_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(o.maps_dir, ec);
+    if (ec) throw OutputError(o.maps_dir + ": cannot create the map folder: " + ec.message());
+  }
+  std::vector<PopKind> kinds;
 
   std::unique_ptr<FrameData> prev;
   for (const int frame : frames) {
@@ -979,7 +1011,8 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
       s.radius = m.radius;
       s.bake_min_speed = m.min_speed;
       s.rest_speed = report.rest_speed;
-      pair_metrics(*prev, *cur, s, fm);
+      pair_metrics(*prev, *cur, s, fm, o.maps_dir.empty() ? nullptr : &kinds);
+      if (!o.maps_dir.empty()) report.maps.push_back(write_popping_map(m, *cur, kinds, o.maps_dir));
     }
     fm.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (fm.born) report.born += *fm.born;

@@ -316,6 +316,49 @@ TEST(Eval, ToyAtlasMatchesHandComputedValues) {
   EXPECT_EQ(r.died, 2u);
 }
 
+TEST(Eval, PoppingMapsShowWhereAndWhyTheTexturePopped) {
+  // Frame 2: B's patch becomes 11, born on the frame; frame 3: it becomes 7,
+  // A's patch, older than 11. A keeps its patch throughout.
+  TempDir dir("eval_maps");
+  write_toy_bake(dir, {ToyFrame{9, {}, {}}, ToyFrame{11, {}, {}}, ToyFrame{7, {}, {}}});
+  EvalOptions o;
+  o.maps_dir = dir / "maps";
+  const EvalReport r = evaluate_bake(dir.str(), o);
+  ASSERT_EQ(r.frames.size(), 3u);
+  // The first frame has nothing to compare with: no map.
+  ASSERT_EQ(r.maps.size(), 2u);
+  EXPECT_EQ(r.maps[0], dir / "maps/toy.popping.0002.exr");
+  EXPECT_EQ(r.maps[1], dir / "maps/toy.popping.0003.exr");
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_EQ(image_channel_names(r.maps[k]), (std::vector<std::string>{"R", "G", "B", "A"}));
+    const Image map = read_image(r.maps[k]);
+    ASSERT_EQ(map.width, 4);
+    ASSERT_EQ(map.height, 4);
+    ASSERT_EQ(map.channels, 4);
+    std::size_t compared = 0;
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 4; ++x) {
+        const bool b_covered = in_b(x, y) && !uncovered(x, y);
+        const std::string at = fmt::format("frame {} texel ({}, {})", k + 2, x, y);
+        EXPECT_EQ(map.at(x, y, 0), k == 0 && b_covered ? 1.f : 0.f) << at;  // popped to a newborn
+        EXPECT_EQ(map.at(x, y, 1), k == 1 && b_covered ? 1.f : 0.f) << at;  // popped to an older patch
+        EXPECT_EQ(map.at(x, y, 2), in_a(x, y) ? 1.f : 0.f) << at;           // kept
+        EXPECT_EQ(map.at(x, y, 3), in_a(x, y) || b_covered ? 1.f : 0.f) << at;
+        compared += map.at(x, y, 3) == 1.f;
+      }
+    EXPECT_EQ(compared, r.frames[std::size_t(k) + 1].popping_texels);
+  }
+  // Frame 3 popped as much as frame 2, none of it to a birth.
+  EXPECT_NEAR(r.frames[2].popping, 12.0 / 18.0, 1e-9);
+  EXPECT_EQ(r.frames[2].popping_births, 0.0);
+
+  // Without the option nothing is written.
+  TempDir plain("eval_no_maps");
+  write_toy_bake(plain, {ToyFrame{9, {}, {}}, ToyFrame{11, {}, {}}});
+  EXPECT_TRUE(evaluate_bake(plain.str()).maps.empty());
+  EXPECT_FALSE(std::filesystem::exists(plain / "toy.eval_maps"));
+}
+
 TEST(Eval, GridToyDriftAtFixedPointsLeavesBordersOut) {
   TempDir dir("eval_grid");
   // Frame 2: the right patch is renamed (a new patch there), texel (1,2)'s
@@ -589,6 +632,13 @@ TEST(Eval, CommandLinePrintsJsonAndWritesPlots) {
   EXPECT_NEAR(j["frames"][1]["popping"].get<double>(), 2.0 / 3.0, 1e-9);
   EXPECT_TRUE(j["frames"][0]["popping"].is_null());
   EXPECT_NEAR(j["summary"]["coverage"]["mean"].get<double>(), 10.0 / 12.0, 1e-12);
+
+  // --maps without a folder writes beside the bake.
+  ASSERT_EQ(test::run_command(std::string(LAPFLOW_BINARY) + " eval '" + dir.str() + "' --quiet --maps", &out, &err, dir),
+            0)
+      << err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "toy.eval_maps/toy.popping.0002.exr"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "toy.eval_maps/toy.popping.0001.exr"));
 
   // The table names every frame; a folder without a bake is bad input (2).
   ASSERT_EQ(test::run_command(std::string(LAPFLOW_BINARY) + " eval '" + dir.str() + "' --quiet", &out, &err, dir), 0);

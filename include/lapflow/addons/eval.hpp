@@ -26,6 +26,11 @@ struct EvalOptions {
   int windows = 16384;                ///< 5x5 windows per side sampled for the sliced Wasserstein distance
   int projections = 64;               ///< random unit directions of the sliced Wasserstein distance
   uint64_t seed = 1;                  ///< seed of those directions
+  /// When set, a popping map per frame after the first goes into this folder
+  /// (created): NAME.popping.NNNN.exr in that frame's atlas layout, R = the
+  /// texel popped to a patch born on the frame, G = popped to an older patch,
+  /// B = compared and kept, A = compared (docs/eval.md, "Popping maps").
+  std::string maps_dir;
 };
 
 constexpr double kNoValue = std::numeric_limits<double>::quiet_NaN();
@@ -108,6 +113,7 @@ struct EvalReport {
   std::vector<FrameMetrics> frames;
   std::vector<MetricSummary> summary;
   std::size_t born = 0, died = 0;  ///< over the evaluated frames
+  std::vector<std::string> maps;   ///< popping maps written (EvalOptions::maps_dir)
 };
 
 /// Evaluates the bake in `dir` (a folder with one NAME.bake.json, or the
