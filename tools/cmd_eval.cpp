@@ -94,7 +94,7 @@ void add_eval_command(CLI::App& app) {
                 ->expected(0, 1);
   c.maps = cmd->add_option("--maps", c.maps_dir,
                            "Write a popping map per frame into DIR (default: DIR/NAME.eval_maps): NAME.popping.N.exr "
-                           "in the frame's atlas layout, R popped to a newborn patch, G popped to an older patch, B "
+                           "in the frame's atlas layout, R popped to a newborn patch, G popped to an existing patch, B "
                            "kept, A compared")
                ->expected(0, 1);
   cmd->add_option("--min-speed", c.min_speed, "Rest threshold in m/s for drift (default: the bake's --min-speed)");

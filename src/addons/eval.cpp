@@ -728,7 +728,7 @@ void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSet
 
 // What a chart texel of the current frame was in the popping count
 // (pair_metrics), as a popping map shows it.
-enum class PopKind : uint8_t { NotCompared, Kept, PoppedToOlder, PoppedToNewborn };
+enum class PopKind : uint8_t { NotCompared, Kept, PoppedToExisting, PoppedToNewborn };
 
 void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m,
                   std::vector<PopKind>* kinds = nullptr) {
@@ -806,7 +806,7 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
         p.w_popped += w;
         if (born) p.w_popped_born += w;
       }
-      if (kinds) (*kinds)[i] = !popped ? PopKind::Kept : born ? PopKind::PoppedToNewborn : PopKind::PoppedToOlder;
+      if (kinds) (*kinds)[i] = !popped ? PopKind::Kept : born ? PopKind::PoppedToNewborn : PopKind::PoppedToExisting;
       if (norm(v) <= s.rest_speed) {
         ++p.rest;
         bool changed = other_patch;
@@ -889,7 +889,7 @@ std::string write_popping_map(const BakeManifest& m, const FrameData& cur, const
     if (kinds[i] == PopKind::NotCompared) continue;
     float* px = &img.pixels[std::size_t(cur.texels.texel[i]) * 4];
     px[0] = kinds[i] == PopKind::PoppedToNewborn;
-    px[1] = kinds[i] == PopKind::PoppedToOlder;
+    px[1] = kinds[i] == PopKind::PoppedToExisting;
     px[2] = kinds[i] == PopKind::Kept;
     px[3] = 1;
   }

@@ -341,7 +341,7 @@ TEST(Eval, PoppingMapsShowWhereAndWhyTheTexturePopped) {
         const bool b_covered = in_b(x, y) && !uncovered(x, y);
         const std::string at = fmt::format("frame {} texel ({}, {})", k + 2, x, y);
         EXPECT_EQ(map.at(x, y, 0), k == 0 && b_covered ? 1.f : 0.f) << at;  // popped to a newborn
-        EXPECT_EQ(map.at(x, y, 1), k == 1 && b_covered ? 1.f : 0.f) << at;  // popped to an older patch
+        EXPECT_EQ(map.at(x, y, 1), k == 1 && b_covered ? 1.f : 0.f) << at;  // popped to an existing patch
         EXPECT_EQ(map.at(x, y, 2), in_a(x, y) ? 1.f : 0.f) << at;           // kept
         EXPECT_EQ(map.at(x, y, 3), in_a(x, y) || b_covered ? 1.f : 0.f) << at;
         compared += map.at(x, y, 3) == 1.f;

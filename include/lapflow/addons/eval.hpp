@@ -28,7 +28,7 @@ struct EvalOptions {
   uint64_t seed = 1;                  ///< seed of those directions
   /// When set, a popping map per frame after the first goes into this folder
   /// (created): NAME.popping.NNNN.exr in that frame's atlas layout, R = the
-  /// texel popped to a patch born on the frame, G = popped to an older patch,
+  /// texel popped to a patch born on the frame, G = popped to a patch that already existed,
   /// B = compared and kept, A = compared (docs/eval.md, "Popping maps").
   std::string maps_dir;
 };
