@@ -78,6 +78,23 @@ inline std::vector<std::string> names_in(const std::string& dir) {
   return names;
 }
 
+/// The id of a process that has ended (a child that exited and was reaped):
+/// its temporary files are stale.
+inline long ended_process_id() {
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  return long(child);
+}
+
+/// The temporary name lapflow gives `NAME` (before the extension) written by
+/// process `pid` of host `host` in call `k`: `.NAME.tmpHOST-PID_K.EXT`.
+inline std::string temporary_name(const std::string& name, const std::string& ext, const std::string& host, long pid,
+                                  int k = 0) {
+  return "." + name + ".tmp" + host + "-" + std::to_string(pid) + "_" + std::to_string(k) + ext;
+}
+
 /// The temporary files (".tmp" in the name) left in `dir`, sorted.
 inline std::vector<std::string> temporaries_in(const std::string& dir) {
   std::vector<std::string> t;

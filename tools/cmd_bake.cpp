@@ -124,7 +124,7 @@ void add_bake_command(CLI::App& app) {
       "  NAME.stats.jsonl          one JSON line per frame: counts, coverage, seconds per stage, memory\n"
       "Every file of a frame is written to a temporary name; they are renamed into place together, the OBJ\n"
       "last: a frame whose OBJ is there is complete. A bake first removes the temporary files (.NAME.*.tmp*)\n"
-      "that killed runs of it left in --out. SIGINT or SIGTERM stops at the next frame boundary (a frame being\n"
+      "that killed runs of it left in --out (never those of a process still running). SIGINT or SIGTERM stops at the next frame boundary (a frame being\n"
       "written is finished, one being computed is dropped); a second one stops at once. Neither leaves a\n"
       "temporary file.\n"
       "--resume continues a killed or stopped bake after its last complete frame with a state, with the same\n"

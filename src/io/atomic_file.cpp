@@ -1,16 +1,22 @@
 #include "lapflow/io/atomic_file.hpp"
 
+#include <signal.h>
 #include <sys/resource.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
+#include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <regex>
 #include <system_error>
+
+#include <fmt/format.h>
 
 #include "lapflow/core/errors.hpp"
 
@@ -18,15 +24,22 @@ namespace lapflow {
 namespace fs = std::filesystem;
 namespace {
 
-/// `DIR/.STEM.tmpPID_K.EXT` for `DIR/STEM.EXT`: same folder (rename is
-/// atomic only within a file system), hidden, unique per process and call,
-/// ending in the target's extension.
+/// `DIR/.STEM.tmpHOST-PID_K.EXT` for `DIR/STEM.EXT`: same folder (rename is
+/// atomic only within a file system), hidden, unique per host, process and
+/// call, ending in the target's extension.
 std::string temporary_path(const std::string& path) {
   static std::atomic<unsigned> counter{0};
   const fs::path target(path);
-  return (target.parent_path() / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + "_" +
-                                  std::to_string(counter++) + target.extension().string()))
+  return (target.parent_path() / fmt::format(".{}.tmp{}-{}_{}{}", target.stem().string(), temporary_host_tag(), ::getpid(),
+                                             counter++, target.extension().string()))
       .string();
+}
+
+/// Whether process `pid` of this host is running (or may be: a process of
+/// another user answers EPERM).
+bool process_running(long pid) {
+  if (pid <= 0 || pid != long(pid_t(pid))) return false;
+  return ::kill(pid_t(pid), 0) == 0 || errno == EPERM;
 }
 
 void remove_quietly(const std::string& path) {
@@ -41,6 +54,18 @@ void move_into_place(const std::string& tmp, const std::string& path) {
 }
 
 }  // namespace
+
+// FNV-1a: the tag only has to tell a farm's hosts apart.
+const std::string& temporary_host_tag() {
+  static const std::string tag = [] {
+    std::array<char, 256> name{};
+    if (::gethostname(name.data(), name.size() - 1) != 0) name[0] = '\0';
+    std::uint32_t h = 2166136261u;
+    for (const char* c = name.data(); *c; ++c) h = (h ^ std::uint8_t(*c)) * 16777619u;
+    return fmt::format("{:08x}", h);
+  }();
+  return tag;
+}
 
 void write_atomically(const std::string& path, const std::function<void(const std::string&)>& write,
                       StagedFiles* staged) {
@@ -133,16 +158,35 @@ std::string write_failure_reason(const std::string& path) {
 }
 
 std::vector<std::string> remove_stale_temporaries(const std::string& dir,
-                                                  const std::vector<std::string>& stem_patterns) {
+                                                  const std::vector<std::string>& stem_patterns,
+                                                  std::chrono::seconds foreign_age) {
   std::string alternatives;
   for (const std::string& p : stem_patterns) alternatives += (alternatives.empty() ? "" : "|") + p;
-  // The shape temporary_path() gives: .STEM.tmpPID_K.EXT
-  const std::regex stale("\\.(" + alternatives + ")\\.tmp[0-9]+_[0-9]+(\\.[A-Za-z0-9]+)?");
+  // The shape temporary_path() gives, .STEM.tmpHOST-PID_K.EXT, and the one
+  // before the host tag, .STEM.tmpPID_K.EXT.
+  const std::regex stale("\\.(?:" + alternatives + ")\\.tmp(?:([0-9a-f]{8})-)?([0-9]+)_[0-9]+(?:\\.[A-Za-z0-9]+)?");
+  const auto now = fs::file_time_type::clock::now();
   std::vector<std::string> removed;
   std::error_code ec;
   for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    if (name.empty() || name[0] != '.' || !std::regex_match(name, stale)) continue;
+    std::smatch m;
+    if (name.empty() || name[0] != '.' || !std::regex_match(name, m, stale)) continue;
+    // A running process's file is being written (a farm's render beside a
+    // tracking chunk, both in one folder): never taken from under it.
+    // The host and the process id are the last two groups (a stem pattern
+    // may have its own).
+    const auto& host = m[m.size() - 2];
+    const auto& pid = m[m.size() - 1];
+    bool dead;
+    if (host.matched && host.str() == temporary_host_tag()) {
+      dead = pid.length() <= 9 && !process_running(std::stol(pid.str()));
+    } else {
+      std::error_code tec;
+      const auto written = fs::last_write_time(entry.path(), tec);
+      dead = !tec && now - written > foreign_age;
+    }
+    if (!dead) continue;
     if (std::error_code rm; fs::remove(entry.path(), rm)) removed.push_back(name);
   }
   std::sort(removed.begin(), removed.end());

@@ -15,6 +15,7 @@
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/io/atomic_file.hpp"
 #include "lapflow/io/mesh_io.hpp"
 
 using namespace lapflow;
@@ -109,14 +110,23 @@ TEST(BakeWriter, AStopBetweenFramesLeavesOnlyWholeFrames) {
 }
 
 // A bake's start removes the temporary files a killed run of the same bake
-// left (a SIGKILL cannot be caught), and only those.
+// left (a SIGKILL cannot be caught), and only those: not another bake's, and
+// not those a running process is writing (a farm's render job beside it).
 TEST(BakeWriter, ABakeRemovesTheStaleTemporaryFilesOfItsOwnName) {
   TempDir meshes("stale_in"), out("stale_out");
   write_demo_sequence(meshes.str(), 1);
-  for (const char* n : {".t.color.0002.tmp4242_7.exr", ".t.0001.tmp4242_9.obj", ".t.stats.tmp4242_3.jsonl"})
-    test::write_bytes(out / n, std::string(1000, 'x'));
-  test::write_bytes(out / ".other.color.0001.tmp4242_7.exr", "another bake's");
+  const std::string& host = temporary_host_tag();
+  const long gone = test::ended_process_id();
+  for (const auto& [name, ext] : {std::pair{"t.color.0002", ".exr"}, {"t.0001", ".obj"}, {"t.stats", ".jsonl"}})
+    test::write_bytes(out / test::temporary_name(name, ext, host, gone, 9), std::string(1000, 'x'));
+  const std::string other = test::temporary_name("other.color.0001", ".exr", host, gone, 7);
+  const std::string rendering = test::temporary_name("t.aov.0003", ".exr", host, long(::getppid()), 7);
+  test::write_bytes(out / other, "another bake's");
+  test::write_bytes(out / rendering, "a running render's");
   bake(small_bake(meshes.str(), out.str()));
-  EXPECT_EQ(temporaries_in(out.str()), std::vector<std::string>{".other.color.0001.tmp4242_7.exr"});
+  std::vector<std::string> left = {other, rendering};
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(temporaries_in(out.str()), left);
+  EXPECT_EQ(test::read_bytes(out / rendering), "a running render's");
   for (const char* kind : kFrameFiles) EXPECT_TRUE(fs::exists(out / fmt::format(fmt::runtime(kind), 1))) << kind;
 }

@@ -3,6 +3,9 @@
 // last, no temporary file left on any path.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <chrono>
 #include <filesystem>
 #include <stdexcept>
 
@@ -97,17 +100,23 @@ TEST(StagedFiles, AFailedCommitNeverLeavesAnOldCommitFileBesideNewFiles) {
 
 TEST(StaleTemporaries, OnlyThisBakesTemporaryFilesAreRemoved) {
   TempDir dir("stale");
-  const std::vector<std::string> stale = {".t.color.0002.tmp4242_7.exr", ".t.disp.0002.tmp4242_8.exr",
-                                          ".t.0002.tmp4242_9.obj",       ".t.0002.tmp4242_10.mtl",
-                                          ".t.stats.tmp4242_11.jsonl",   ".t.bake.tmp4242_0.json",
-                                          ".t.patches.0002.tmp1_2.ply",  ".t.aov.0013.tmp77_3.exr"};
+  const std::string& host = temporary_host_tag();
+  const long gone = test::ended_process_id();
+  const auto tmp = [&](const std::string& name, const std::string& ext) {
+    return test::temporary_name(name, ext, host, gone, 7);
+  };
+  const std::vector<std::string> stale = {tmp("t.color.0002", ".exr"), tmp("t.disp.0002", ".exr"),
+                                          tmp("t.0002", ".obj"),       tmp("t.0002", ".mtl"),
+                                          tmp("t.stats", ".jsonl"),    tmp("t.bake", ".json"),
+                                          tmp("t.patches.0002", ".ply"), tmp("t.aov.0013", ".exr"),
+                                          tmp("t.state.0013", ".bin")};
   const std::vector<std::string> kept = {
-      ".u.color.0002.tmp4242_7.exr",  // another bake's
-      ".tx.0002.tmp4242_9.obj",       // another bake whose name starts with "t"
-      ".t.notes.tmp1_1.txt",          // not a file a bake writes
-      "t.color.0002.exr",             // a finished file
-      ".t.color.0002.exr",            // hidden but not a temporary
-      "t.0002.tmp4242_9.obj"};        // not hidden
+      tmp("u.color.0002", ".exr"),  // another bake's
+      tmp("tx.0002", ".obj"),       // another bake whose name starts with "t"
+      tmp("t.notes", ".txt"),       // not a file a bake writes
+      "t.color.0002.exr",           // a finished file
+      ".t.color.0002.exr",          // hidden but not a temporary
+      "t.0002" + tmp("", ".obj").substr(1)};  // not hidden
   for (const auto& n : stale) test::write_bytes(dir / n, "x");
   for (const auto& n : kept) test::write_bytes(dir / n, "x");
   std::vector<std::string> expected = stale;
@@ -117,9 +126,52 @@ TEST(StaleTemporaries, OnlyThisBakesTemporaryFilesAreRemoved) {
   std::sort(left.begin(), left.end());
   EXPECT_EQ(names_in(dir.str()), left);
   // A name with regex characters is taken literally.
-  test::write_bytes(dir / ".a+b.0001.tmp1_1.obj", "x");
-  test::write_bytes(dir / ".aab.0001.tmp1_1.obj", "x");
+  test::write_bytes(dir / tmp("a+b.0001", ".obj"), "x");
+  test::write_bytes(dir / tmp("aab.0001", ".obj"), "x");
   EXPECT_EQ(remove_stale_temporaries(dir.str(), bake_file_stem_patterns("a+b")),
-            std::vector<std::string>{".a+b.0001.tmp1_1.obj"});
-  EXPECT_TRUE(fs::exists(dir / ".aab.0001.tmp1_1.obj"));
+            std::vector<std::string>{tmp("a+b.0001", ".obj")});
+  EXPECT_TRUE(fs::exists(dir / tmp("aab.0001", ".obj")));
+}
+
+// A farm runs a tracking chunk and render jobs in one --out folder at once,
+// each starting with remove_stale_temporaries(): the files a running process
+// is writing stay. Another host's process cannot be asked: its files go only
+// once old, as do those named before the host tag.
+TEST(StaleTemporaries, ARunningProcesssFilesStayAnotherHostsGoWhenOld) {
+  TempDir dir("stale_live");
+  const std::string& host = temporary_host_tag();
+  std::string other = host;
+  other[0] = other[0] == '0' ? '1' : '0';
+  const long running = long(::getppid());  // the test runner
+  const std::string writing = test::temporary_name("t.aov.0003", ".exr", host, running, 4);
+  const std::string mine = test::temporary_name("t.0003", ".obj", host, long(::getpid()), 5);
+  const std::string elsewhere = test::temporary_name("t.color.0003", ".exr", other, test::ended_process_id(), 6);
+  const std::string elsewhere_old = test::temporary_name("t.color.0002", ".exr", other, 77, 6);
+  const std::string untagged = ".t.disp.0003.tmp4242_7.exr";
+  const std::string untagged_old = ".t.disp.0002.tmp4242_7.exr";
+  for (const std::string& n : {writing, mine, elsewhere, elsewhere_old, untagged, untagged_old})
+    test::write_bytes(dir / n, "x");
+  const auto two_hours_ago = fs::file_time_type::clock::now() - std::chrono::hours(2);
+  fs::last_write_time(dir / elsewhere_old, two_hours_ago);
+  fs::last_write_time(dir / untagged_old, two_hours_ago);
+  std::vector<std::string> expected = {elsewhere_old, untagged_old};
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(remove_stale_temporaries(dir.str(), bake_file_stem_patterns("t")), expected);
+  std::vector<std::string> left = {writing, mine, elsewhere, untagged};
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(names_in(dir.str()), left);
+}
+
+// The name a write uses carries this host's tag and this process's id.
+TEST(StaleTemporaries, AWritesTemporaryNameCarriesHostAndProcess) {
+  TempDir dir("stale_name");
+  std::string seen;
+  write_atomically(dir / "t.0001.obj", [&](const std::string& tmp) {
+    seen = fs::path(tmp).filename().string();
+    test::write_bytes(tmp, "x");
+  });
+  const std::string prefix = ".t.0001.tmp" + temporary_host_tag() + "-" + std::to_string(::getpid()) + "_";
+  EXPECT_EQ(seen.substr(0, prefix.size()), prefix) << seen;
+  EXPECT_TRUE(seen.ends_with(".obj")) << seen;
+  EXPECT_EQ(temporary_host_tag().size(), 8u);
 }

@@ -2,8 +2,10 @@
 /// \file atomic_file.hpp Every output is written to a temporary name in the
 /// destination folder and renamed, so an interrupted run never leaves a half
 /// file and never damages an earlier one. The temporary name of `DIR/S.EXT`
-/// is `DIR/.S.tmpPID_K.EXT`: hidden, unique per process and call, and with
-/// the final extension (OIIO picks the format from it).
+/// is `DIR/.S.tmpHOST-PID_K.EXT`: hidden, unique per host (8 hex digits of a
+/// hash of its name), process and call, and with the final extension (OIIO
+/// picks the format from it).
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -71,10 +73,21 @@ class StagedFiles {
 /// process's file-size limit (RLIMIT_FSIZE); "" when neither.
 std::string write_failure_reason(const std::string& path);
 
+/// This host's tag in temporary names: 8 hex digits of a hash of its host
+/// name. Render jobs on several nodes may write one --out folder (a farm on
+/// a shared file system), and a process id means something only on the host
+/// that gave it.
+const std::string& temporary_host_tag();
+
 /// Removes the temporary files that earlier, killed runs left in `dir` for
 /// files whose name (before the extension) is one of `stems` or matches a
 /// stem pattern: `stem_patterns` are ECMAScript regexes (`NAME\.color\.\d+`).
-/// Returns the names removed. Files of other names are never touched.
-std::vector<std::string> remove_stale_temporaries(const std::string& dir, const std::vector<std::string>& stem_patterns);
+/// A file of this host is removed when the process that wrote it is no longer
+/// running; one of another host (or without a host tag) when it was last
+/// written over `foreign_age` ago. A running process's files are never
+/// touched: a farm runs tracking chunks and render jobs in one folder at
+/// once. Returns the names removed. Files of other names are never touched.
+std::vector<std::string> remove_stale_temporaries(const std::string& dir, const std::vector<std::string>& stem_patterns,
+                                                  std::chrono::seconds foreign_age = std::chrono::hours(1));
 
 }  // namespace lapflow
