@@ -55,13 +55,23 @@ void move_into_place(const std::string& tmp, const std::string& path) {
 
 }  // namespace
 
-// FNV-1a: the tag only has to tell a farm's hosts apart.
 const std::string& temporary_host_tag() {
+  // What makes a process id mean one process: the host, its boot (ids start
+  // again after a reboot) and the PID namespace (a container's ids are its
+  // own). FNV-1a: the tag only has to tell a farm's hosts apart.
   static const std::string tag = [] {
     std::array<char, 256> name{};
     if (::gethostname(name.data(), name.size() - 1) != 0) name[0] = '\0';
+    std::string key = name.data();
+    std::error_code ec;
+    key += "|" + fs::read_symlink("/proc/self/ns/pid", ec).string();
+    if (std::FILE* f = std::fopen("/proc/sys/kernel/random/boot_id", "rb")) {
+      std::array<char, 64> boot{};
+      key += "|" + std::string(boot.data(), std::fread(boot.data(), 1, boot.size(), f));
+      std::fclose(f);
+    }
     std::uint32_t h = 2166136261u;
-    for (const char* c = name.data(); *c; ++c) h = (h ^ std::uint8_t(*c)) * 16777619u;
+    for (const char c : key) h = (h ^ std::uint8_t(c)) * 16777619u;
     return fmt::format("{:08x}", h);
   }();
   return tag;

@@ -3,7 +3,7 @@
 /// destination folder and renamed, so an interrupted run never leaves a half
 /// file and never damages an earlier one. The temporary name of `DIR/S.EXT`
 /// is `DIR/.S.tmpHOST-PID_K.EXT`: hidden, unique per host (8 hex digits of a
-/// hash of its name), process and call, and with the final extension (OIIO
+/// hash of its name, boot and PID namespace), process and call, and with the final extension (OIIO
 /// picks the format from it).
 #include <chrono>
 #include <functional>
@@ -74,9 +74,9 @@ class StagedFiles {
 std::string write_failure_reason(const std::string& path);
 
 /// This host's tag in temporary names: 8 hex digits of a hash of its host
-/// name. Render jobs on several nodes may write one --out folder (a farm on
-/// a shared file system), and a process id means something only on the host
-/// that gave it.
+/// name, boot id and PID namespace. Render jobs on several nodes (or in
+/// containers) may write one --out folder, and a process id means something
+/// only where it was given.
 const std::string& temporary_host_tag();
 
 /// Removes the temporary files that earlier, killed runs left in `dir` for
