@@ -30,9 +30,9 @@ namespace {
 std::string temporary_path(const std::string& path) {
   static std::atomic<unsigned> counter{0};
   const fs::path target(path);
-  return (target.parent_path() / fmt::format(".{}.tmp{}-{}_{}{}", target.stem().string(), temporary_host_tag(), ::getpid(),
-                                             counter++, target.extension().string()))
-      .string();
+  const std::string name = fmt::format(".{}.tmp{}-{}_{}{}", target.stem().string(), temporary_host_tag(), ::getpid(),
+                                      counter++, target.extension().string());
+  return (target.parent_path() / name).string();
 }
 
 /// Whether process `pid` of this host is running (or may be: a process of

@@ -3,8 +3,8 @@
 /// destination folder and renamed, so an interrupted run never leaves a half
 /// file and never damages an earlier one. The temporary name of `DIR/S.EXT`
 /// is `DIR/.S.tmpHOST-PID_K.EXT`: hidden, unique per host (8 hex digits of a
-/// hash of its name, boot and PID namespace), process and call, and with the final extension (OIIO
-/// picks the format from it).
+/// hash of its name, boot and PID namespace), process and call, and with the
+/// final extension (OIIO picks the format from it).
 #include <chrono>
 #include <functional>
 #include <memory>
