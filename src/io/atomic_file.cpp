@@ -17,6 +17,7 @@
 #include <system_error>
 
 #include <fmt/format.h>
+#include <zlib.h>
 
 #include "lapflow/core/errors.hpp"
 
@@ -37,10 +38,7 @@ std::string temporary_path(const std::string& path) {
 
 /// Whether process `pid` of this host is running (or may be: a process of
 /// another user answers EPERM).
-bool process_running(long pid) {
-  if (pid <= 0 || pid != long(pid_t(pid))) return false;
-  return ::kill(pid_t(pid), 0) == 0 || errno == EPERM;
-}
+bool process_running(pid_t pid) { return pid > 0 && (::kill(pid, 0) == 0 || errno == EPERM); }
 
 void remove_quietly(const std::string& path) {
   std::error_code ec;
@@ -58,7 +56,8 @@ void move_into_place(const std::string& tmp, const std::string& path) {
 const std::string& temporary_host_tag() {
   // What makes a process id mean one process: the host, its boot (ids start
   // again after a reboot) and the PID namespace (a container's ids are its
-  // own). FNV-1a: the tag only has to tell a farm's hosts apart.
+  // own). A CRC, as the manifest's digests: the tag only has to tell a
+  // farm's hosts apart.
   static const std::string tag = [] {
     std::array<char, 256> name{};
     if (::gethostname(name.data(), name.size() - 1) != 0) name[0] = '\0';
@@ -70,9 +69,8 @@ const std::string& temporary_host_tag() {
       key += "|" + std::string(boot.data(), std::fread(boot.data(), 1, boot.size(), f));
       std::fclose(f);
     }
-    std::uint32_t h = 2166136261u;
-    for (const char c : key) h = (h ^ std::uint8_t(c)) * 16777619u;
-    return fmt::format("{:08x}", h);
+    const uLong crc = crc32(crc32(0, nullptr, 0), reinterpret_cast<const Bytef*>(key.data()), uInt(key.size()));
+    return fmt::format("{:08x}", std::uint32_t(crc));
   }();
   return tag;
 }
@@ -190,7 +188,8 @@ std::vector<std::string> remove_stale_temporaries(const std::string& dir,
     const auto& pid = m[m.size() - 1];
     bool dead;
     if (host.matched && host.str() == temporary_host_tag()) {
-      dead = pid.length() <= 9 && !process_running(std::stol(pid.str()));
+      // Nine digits fit a pid_t (a longer id is left alone).
+      dead = pid.length() <= 9 && !process_running(pid_t(std::stol(pid.str())));
     } else {
       std::error_code tec;
       const auto written = fs::last_write_time(entry.path(), tec);
