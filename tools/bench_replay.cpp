@@ -29,6 +29,8 @@ uint64_t digest(const Frame& frame, const PatchSet& patches) {
   uint64_t h = kFnvOffset;
   for (const Image* img : {&frame.textures.color, &frame.textures.displacement, &frame.textures.aov})
     h = fnv1a(img->pixels.data(), img->pixels.size() * sizeof(float), h);
+  for (const HalfImage* img : {&frame.textures.color_half, &frame.textures.displacement_half})
+    h = fnv1a(img->bits.data(), img->bits.size() * sizeof(uint16_t), h);
   for (const Patch& p : patches.patches) {
     h = fnv1a(&p.id, sizeof p.id, h);
     h = fnv1a(&p.birth_frame, sizeof p.birth_frame, h);

@@ -256,6 +256,8 @@ void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& e
   RasterOptions output = o.raster;
   output.mark_held = false;  // nothing retires here: the tracking marked the cells
   output.held_texel = o.track_texel;
+  // The writer's pixels as the resolve makes them (no float images).
+  output.half_images = o.exr.type == ExrPixelType::Half;
   frame.raster = begin_raster(frame.mesh, frame.atlas, exemplar, output, o.weights,
                               surface_triangle_locator(*frame.surface, o.raster.radius));
   draw_patches(frame.raster, patches);

@@ -180,7 +180,11 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
   auto job = std::make_shared<Job>();
   job->frame = frame->number;
   job->textures = std::move(frame->textures);
-  if (options_.exr.type == ExrPixelType::Half && !job->textures.color.empty()) {
+  if (!job->textures.color_half.bits.empty()) {
+    // Made in half by the resolve (RasterOptions::half_images).
+    job->color_half = std::move(job->textures.color_half);
+    job->displacement_half = std::move(job->textures.displacement_half);
+  } else if (options_.exr.type == ExrPixelType::Half && !job->textures.color.empty()) {
     // The same conversion write_exr does, done now: the files are written
     // (or wait for the writer) from half the bytes, and the floats go back to
     // the heap for the next frame's images before the writes begin.

@@ -250,17 +250,20 @@ void to_half_portable(const float* in, uint16_t* out, std::size_t n) {
 // that serial step out of every frame's write.
 std::vector<uint16_t> to_half(const std::vector<float>& in) {
   std::vector<uint16_t> out(in.size());
-  static const bool f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
-  parallel_for(in.size(), [&](std::size_t b, std::size_t e) {
-    if (f16c)
-      to_half_f16c(in.data() + b, out.data() + b, e - b);
-    else
-      to_half_portable(in.data() + b, out.data() + b, e - b);
-  }, 1 << 16);
+  parallel_for(in.size(), [&](std::size_t b, std::size_t e) { lapflow::to_half(in.data() + b, out.data() + b, e - b); },
+               1 << 16);
   return out;
 }
 
 }  // namespace
+
+void to_half(const float* in, uint16_t* out, std::size_t n) {
+  static const bool f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+  if (f16c)
+    to_half_f16c(in, out, n);
+  else
+    to_half_portable(in, out, n);
+}
 
 namespace {
 

@@ -969,10 +969,19 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   // The winner's (u, v, w) at the texel centre, then E and H.
   // The three images are allocated (zero-filled, page by page) on both
   // cores at once.
+  const bool half = options.images && options.half_images;
+  auto half_image = [&](int channels) {
+    HalfImage h;
+    h.width = N, h.height = N, h.channels = channels;
+    h.bits.assign(std::size_t(N) * N * std::size_t(channels), 0);  // 0: +0 in half
+    return h;
+  };
   parallel_for(3, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
-      if (k == 0 && options.images) out.color = Image(N, N, 4);
-      if (k == 1 && options.images) out.displacement = Image(N, N, 1);
+      if (k == 0 && half) out.color_half = half_image(4);
+      if (k == 0 && options.images && !half) out.color = Image(N, N, 4);
+      if (k == 1 && half) out.displacement_half = half_image(1);
+      if (k == 1 && options.images && !half) out.displacement = Image(N, N, 1);
       if (k == 2 && options.aov) out.aov = Image(N, N, 4);
     }
   }, 1);
@@ -1054,6 +1063,21 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     Vec2 P[3];
     std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run
     uint64_t run = 0;
+    // half_images: a block of texels' RGBA and H as floats, converted to
+    // half together (to_half's vector instructions) and then stored.
+    constexpr std::size_t kStage = 512;
+    float stage[kStage * 5];
+    uint16_t staged_bits[kStage * 5];
+    std::size_t staged = 0, stage_from = b;
+    auto flush = [&](std::size_t end) {
+      to_half(stage, staged_bits, staged * 5);
+      for (std::size_t k = 0; k < staged; ++k) {
+        const std::size_t pix = tm.texel[stage_from + k];
+        std::copy_n(&staged_bits[k * 5], 4, &out.color_half.bits[pix * 4]);
+        out.displacement_half.bits[pix] = staged_bits[k * 5 + 4];
+      }
+      staged = 0, stage_from = end;
+    };
     for (std::size_t i = b; i < e; ++i) {
       const uint32_t pix = tm.texel[i];
       const int x = int(pix % uint32_t(N)), y = int(pix / uint32_t(N));
@@ -1125,13 +1149,19 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const int64_t* sum = &ctx.blend.sums[i * 5];
           for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
         }
-        float* c = &out.color.pixels[std::size_t(pix) * 4];
+        float* c = half ? &stage[staged * 5] : &out.color.pixels[std::size_t(pix) * 4];
         c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
-        out.displacement.pixels[pix] = s[3];
+        if (half) {
+          c[4] = s[3];
+          if (++staged == kStage) flush(i + 1);
+        } else {
+          out.displacement.pixels[pix] = s[3];
+        }
       }
       if (options.aov)
         for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
     }
+    if (half) flush(e);
     if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
   }, 1 << 12);
   {
@@ -1302,8 +1332,13 @@ void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
       for (std::size_t i = b; i < e; ++i) {
         const int32_t s = source[i];
         if (s < 0 || std::size_t(s) == i) continue;
-        for (int k = 0; k < 3; ++k) out.color.pixels[i * 4 + k] = out.color.pixels[std::size_t(s) * 4 + k];
-        out.displacement.pixels[i] = out.displacement.pixels[s];
+        if (!out.color_half.bits.empty()) {
+          for (int k = 0; k < 3; ++k) out.color_half.bits[i * 4 + k] = out.color_half.bits[std::size_t(s) * 4 + k];
+          out.displacement_half.bits[i] = out.displacement_half.bits[s];
+        } else if (!out.color.empty()) {
+          for (int k = 0; k < 3; ++k) out.color.pixels[i * 4 + k] = out.color.pixels[std::size_t(s) * 4 + k];
+          out.displacement.pixels[i] = out.displacement.pixels[s];
+        }
         if (options.aov)
           for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
       }

@@ -10,6 +10,7 @@
 // texels (their keys are larger than every older patch's, so they never take
 // a texel an older patch keeps). Repeat until no hole is left.
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <cmath>
@@ -215,9 +216,15 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   std::vector<uint32_t> open, queue;
   const double spacing = 2 * ctx.radius;
   for (int round = 0; born < max_patches; ++round) {
-    open = uncovered_texels(ctx, [&](std::size_t i) {
+    auto still_open = [&](std::size_t i) {
       return (closed_texel.empty() || !closed_texel[i]) && (failed.empty() || !failed.count(tm.triangle[i]));
-    });
+    };
+    // A round only covers, closes or gives up texels: the next round's open
+    // texels are among this round's (the whole atlas is scanned once).
+    if (round == 0)
+      open = uncovered_texels(ctx, still_open);
+    else
+      std::erase_if(open, [&](uint32_t i) { return ctx.keys[i] != kNoKey || !still_open(i); });
     if (open.empty()) break;
     if (label.empty()) {
       label.resize(tm.size());
@@ -373,6 +380,16 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
     next.assign(open.size(), kNoKey);
     parallel_for(open.size(), [&](std::size_t b, std::size_t e) {
       std::vector<uint64_t> tried;
+      // winner_pixels by (key, texel triangle): neighbouring open texels ask
+      // for the same few (a pure function, so a hit changes no result).
+      struct Cached {
+        uint64_t key = kNoKey;
+        int tri = -1;
+        bool ok = false;
+        Vec2 P[3];
+      };
+      constexpr int kCacheBits = 6;
+      std::array<Cached, std::size_t(1) << kCacheBits> cache;
       for (std::size_t j = b; j < e; ++j) {
         const uint32_t i = open[j];
         const int tri = tm.triangle[i];
@@ -386,8 +403,10 @@ std::size_t close_held_texels(RasterContext& ctx, const PatchSet& patches) {
           const Patch& patch = patches.patches[std::size_t(key >> 32)];
           if (patch.held.empty() || (rest_only && !patch.at_rest)) return;
           const int ti = int(key & 0xffffffffu);
-          Vec2 P[3];
-          if (!winner_pixels(ctx, patch, ti, tri, P)) return;
+          Cached& c = cache[((key ^ uint64_t(uint32_t(tri)) << 20) * 0x9E3779B97F4A7C15ull) >> (64 - kCacheBits)];
+          if (c.key != key || c.tri != tri) c.key = key, c.tri = tri, c.ok = winner_pixels(ctx, patch, ti, tri, c.P);
+          if (!c.ok) return;
+          const Vec2* P = c.P;
           const Vec2 e1 = P[1] - P[0], e2 = P[2] - P[0];
           const double a = cross(e1, e2);
           if (!(std::abs(a) > 1e-12)) return;

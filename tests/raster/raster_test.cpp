@@ -349,6 +349,35 @@ TEST(Raster, SameImagesForOneAndTwoThreads) {
   EXPECT_TRUE(a.aov.pixels == b.aov.pixels);
 }
 
+// RasterOptions::half_images (what a bake writes) gives, pixel for pixel,
+// the floats' half bits: chart texels, the dilated gutter and the
+// background, in each mode; only the kind of image differs.
+TEST(Raster, HalfImagesAreTheFloatImagesInHalf) {
+  for (RasterMode mode : {RasterMode::Erosion, RasterMode::Blend}) {
+    RasterOptions o = paper_options();
+    o.mode = mode;
+    o.gutter = 3;
+    Scene floats = random_scene(true, 60, 99, 128);
+    const FrameTextures a = floats.run(o);
+    o.half_images = true;
+    Scene halves = random_scene(true, 60, 99, 128);
+    const FrameTextures b = halves.run(o);
+    ASSERT_FALSE(a.color.empty());
+    EXPECT_TRUE(b.color.empty() && b.displacement.empty());
+    const HalfImage color = to_half_image(a.color), displacement = to_half_image(a.displacement);
+    ASSERT_EQ(b.color_half.bits.size(), color.bits.size());
+    EXPECT_EQ(b.color_half.channels, 4);
+    EXPECT_TRUE(b.color_half.bits == color.bits);
+    EXPECT_TRUE(b.displacement_half.bits == displacement.bits);
+    EXPECT_TRUE(a.aov.pixels == b.aov.pixels);
+    // The scene has texels of every kind: covered, and gutter (alpha 0).
+    std::size_t covered = 0;
+    for (std::size_t i = 3; i < a.color.pixels.size(); i += 4) covered += a.color.pixels[i] == 1.f;
+    EXPECT_GT(covered, 0u);
+    EXPECT_LT(covered, a.color.pixels.size() / 4);
+  }
+}
+
 TEST(Raster, GutterAndBackgroundTakeTheNearestChartTexel) {
   Scene sc = random_scene(true, 30, 3, 128);
   RasterOptions o = paper_options();

@@ -78,6 +78,9 @@ struct HalfImage {
   std::vector<uint16_t> bits;  ///< width*height*channels
 };
 HalfImage to_half_image(const Image& img);
+/// n floats to half bits on this thread, as to_half_image converts them
+/// (the same bits: IEEE binary16, round to nearest even).
+void to_half(const float* in, uint16_t* out, std::size_t n);
 /// write_exr of an image already in half (options.type is ignored).
 void write_exr(const std::string& path, const HalfImage& img, const std::vector<std::string>& channel_names,
                const ExrOptions& options = {}, StagedFiles* staged = nullptr);
