@@ -1064,25 +1064,19 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run
     uint64_t run = 0;
     // half_images: a block of texels' RGBA and H as floats, converted to
-    // half together (to_half's vector instructions), then stored a run of
-    // consecutive pixels at a time (texels come in row order).
-    constexpr std::size_t kStage = 1024;
-    float stage_color[kStage * 4], stage_height[kStage];
-    uint16_t half_color[kStage * 4], half_height[kStage];
-    uint32_t stage_pix[kStage];
-    std::size_t staged = 0;
-    auto flush = [&] {
-      to_half(stage_color, half_color, staged * 4);
-      to_half(stage_height, half_height, staged);
-      for (std::size_t k = 0; k < staged;) {
-        std::size_t run = 1;
-        while (k + run < staged && stage_pix[k + run] == stage_pix[k] + run) ++run;
-        const std::size_t pix = stage_pix[k];
-        std::copy_n(&half_color[k * 4], run * 4, &out.color_half.bits[pix * 4]);
-        std::copy_n(&half_height[k], run, &out.displacement_half.bits[pix]);
-        k += run;
+    // half together (to_half's vector instructions) and then stored.
+    constexpr std::size_t kStage = 512;
+    float stage[kStage * 5];
+    uint16_t staged_bits[kStage * 5];
+    std::size_t staged = 0, stage_from = b;
+    auto flush = [&](std::size_t end) {
+      to_half(stage, staged_bits, staged * 5);
+      for (std::size_t k = 0; k < staged; ++k) {
+        const std::size_t pix = tm.texel[stage_from + k];
+        std::copy_n(&staged_bits[k * 5], 4, &out.color_half.bits[pix * 4]);
+        out.displacement_half.bits[pix] = staged_bits[k * 5 + 4];
       }
-      staged = 0;
+      staged = 0, stage_from = end;
     };
     for (std::size_t i = b; i < e; ++i) {
       const uint32_t pix = tm.texel[i];
@@ -1155,12 +1149,11 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const int64_t* sum = &ctx.blend.sums[i * 5];
           for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
         }
-        float* c = half ? &stage_color[staged * 4] : &out.color.pixels[std::size_t(pix) * 4];
+        float* c = half ? &stage[staged * 5] : &out.color.pixels[std::size_t(pix) * 4];
         c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
         if (half) {
-          stage_height[staged] = s[3];
-          stage_pix[staged] = pix;
-          if (++staged == kStage) flush();
+          c[4] = s[3];
+          if (++staged == kStage) flush(i + 1);
         } else {
           out.displacement.pixels[pix] = s[3];
         }
@@ -1168,7 +1161,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
       if (options.aov)
         for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
     }
-    if (half) flush();
+    if (half) flush(e);
     if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
   }, 1 << 12);
   {
