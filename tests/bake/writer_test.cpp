@@ -16,6 +16,7 @@
 #include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 
 using namespace lapflow;
@@ -79,6 +80,26 @@ TEST(BakeWriter, SameInputsGiveByteIdenticalFiles) {
   }
   // The stats differ only in the seconds and the memory.
   EXPECT_EQ(stats_without_timings(a / "t.stats.jsonl"), stats_without_timings(b / "t.stats.jsonl"));
+}
+
+// `--exr-type float` keeps the resolve's float images (a half bake makes
+// its images in half directly, RasterOptions::half_images): the float
+// files hold values a half cannot, and round to the half bake's pixels.
+TEST(BakeWriter, AFloatBakeWritesTheHalfBakesPixelsUnrounded) {
+  TempDir meshes("float_in"), half("float_half"), full("float_full");
+  write_demo_sequence(meshes.str(), 2);
+  bake(small_bake(meshes.str(), half.str()));
+  BakeOptions o = small_bake(meshes.str(), full.str());
+  o.exr.type = ExrPixelType::Float;
+  bake(o);
+  for (const char* kind : {"color", "disp"}) {
+    const std::string name = fmt::format("t.{}.0002.exr", kind);
+    const Image h = read_image(half / name, ColorSpace::Linear);
+    const Image f = read_image(full / name, ColorSpace::Linear);
+    ASSERT_EQ(h.pixels.size(), f.pixels.size()) << name;
+    EXPECT_TRUE(to_half_image(f).bits == to_half_image(h).bits) << name << ": not the half bake's pixels";
+    EXPECT_FALSE(f.pixels == h.pixels) << name << ": the float bake's pixels are all halves";
+  }
 }
 
 // A stop asked for while frame 3 computes (as SIGTERM does) abandons it:
