@@ -1328,17 +1328,18 @@ void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
       for (std::size_t i = b; i < e; ++i) source[i] = source[i] >= 0 ? int32_t(i) : -1;
     }, 1 << 16);
     dilate_sources(source, N, options.gutter);
+    // Colour (RGB) and height from pixel s to pixel i, in half or in float.
+    auto copy_images = [](auto& color, auto& height, std::size_t i, std::size_t s) {
+      if (color.empty()) return;
+      for (int k = 0; k < 3; ++k) color[i * 4 + k] = color[s * 4 + k];
+      height[i] = height[s];
+    };
     parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         const int32_t s = source[i];
         if (s < 0 || std::size_t(s) == i) continue;
-        if (!out.color_half.bits.empty()) {
-          for (int k = 0; k < 3; ++k) out.color_half.bits[i * 4 + k] = out.color_half.bits[std::size_t(s) * 4 + k];
-          out.displacement_half.bits[i] = out.displacement_half.bits[s];
-        } else if (!out.color.empty()) {
-          for (int k = 0; k < 3; ++k) out.color.pixels[i * 4 + k] = out.color.pixels[std::size_t(s) * 4 + k];
-          out.displacement.pixels[i] = out.displacement.pixels[s];
-        }
+        copy_images(out.color_half.bits, out.displacement_half.bits, i, std::size_t(s));
+        copy_images(out.color.pixels, out.displacement.pixels, i, std::size_t(s));
         if (options.aov)
           for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
       }
