@@ -502,12 +502,18 @@ struct OwnedTiles {
   void first_write(int x, int y, uint64_t key) {
     if (!grid.has(x, y)) return;
     const std::size_t t = grid.at(x, y);
-    if (chart[t] < 0) return;
+    if (chart[t] >= 0) first_writes(t, 1, key);
+  }
+  // `n` texels of pure tile t got their first keys, the largest `key`.
+  void first_writes(std::size_t t, uint32_t n, uint64_t key) {
     uint64_t cur = max_key[t].load(std::memory_order_relaxed);
     while (cur < key && !max_key[t].compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
     }
-    open[t].fetch_sub(1, std::memory_order_release);
+    open[t].fetch_sub(n, std::memory_order_release);
   }
+  // The chart whose texels fill the tile of pixel (x, y), or -1 (mixed, or
+  // no whole tile there).
+  int32_t tile_chart(int x, int y) const { return grid.has(x, y) ? chart[grid.at(x, y)] : -1; }
   // Every pixel of box [x0, x1] x [y0, y1] (clamped to the atlas) is a texel of
   // `c` whose key is below `key`.
   bool kept_below(int x0, int y0, int x1, int y1, int c, uint64_t key) const {
@@ -605,6 +611,13 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
   }
   const int bx0 = box.x0, by0 = box.y0, bx1 = box.x1, by1 = box.y1;
   const std::size_t W = box.width(), H = box.height();
+  // Pixel (x, y), texel idx, is a texel of this chart: a whole tile of it
+  // says so without the texel's triangle (a load from arrays of a texel's
+  // size, the draw's main cost).
+  auto in_chart = [&](int x, int y, int32_t idx) {
+    const int32_t c = owned ? owned->tile_chart(x, y) : -1;
+    return c >= 0 ? c == chart : chart_of[tri_of[idx]] == chart;
+  };
   local.assign(W * H, -1);
   // Per row of the box, the columns some triangle covers (the sweep's span).
   thread_local std::vector<int> span_lo, span_hi;
@@ -637,7 +650,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
           lo = std::min(lo, x), hi = std::max(hi, x);
         } else if (!leak && l0 >= ring[0] && l1 >= ring[1] && l2 >= ring[2]) {
           const int32_t idx = ctx.index[std::size_t(y) * ctx.N + x];
-          leak = idx < 0 || chart_of[tri_of[idx]] != chart;
+          leak = idx < 0 || !in_chart(x, y, idx);
         }
       }
       if (lo <= hi) {
@@ -667,6 +680,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
     for (int32_t i = next[a]; i <= next[b] + 7; i += 8) sink.prefetch(std::min(i, next[b]));
     for (int32_t i = next[a]; i <= next[b] + 15; i += 16) __builtin_prefetch(&tri_of[std::min(i, next[b])]);
   };
+  sink.open_box(bx0, by0, bx1, by1);
   for (int y = by0; y <= by1; ++y) {
     prefetch_rows(y);
     const int32_t* lrow = &local[std::size_t(y - by0) * W] - bx0;
@@ -676,7 +690,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const int32_t k = lrow[x];
       if (k < 0) continue;
       const int32_t idx = irow[x];
-      if (idx < 0 || chart_of[tri_of[idx]] != chart) {
+      if (idx < 0 || !in_chart(x, y, idx)) {
         leaky[k] = 1;
         continue;
       }
@@ -692,6 +706,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
+  sink.close_box();
 }
 
 // Erosion and Advect: each texel keeps the smallest key by atomic min.
@@ -699,6 +714,15 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
 struct KeySink {
   std::vector<uint64_t>& keys;
   OwnedTiles* owned = nullptr;
+  // First writes within the box of open_box, per tile: handed to `owned` at
+  // close_box, one atomic update per tile instead of one per texel. A tile
+  // then looks open a little longer, which only skips less.
+  struct Tally {
+    uint32_t writes = 0;
+    uint64_t key = 0;  // the largest key written
+  };
+  std::vector<Tally>* tally = nullptr;
+  int tx0 = 0, ty0 = 0, tw = 0;
   const OwnedTiles* owned_tiles() const { return owned; }
   void prefetch(int32_t idx) const { __builtin_prefetch(&keys[idx]); }
   bool taken(int32_t idx, uint64_t key) const {
@@ -709,7 +733,34 @@ struct KeySink {
     uint64_t cur = slot.load(std::memory_order_relaxed);
     while (cur > key && !slot.compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
     }
-    if (owned && cur == kNoKey) owned->first_write(x, y, key);
+    if (!owned || cur != kNoKey) return;
+    if (!tally) {
+      owned->first_write(x, y, key);
+      return;
+    }
+    Tally& e = (*tally)[std::size_t((y >> TileGrid::kShift) - ty0) * std::size_t(tw) + std::size_t((x >> TileGrid::kShift) - tx0)];
+    ++e.writes;
+    e.key = std::max(e.key, key);
+  }
+  // Pixel box [x0, x1] x [y0, y1] (inside the atlas): put's pixels until close_box.
+  void open_box(int x0, int y0, int x1, int y1) {
+    if (!owned) return;
+    thread_local std::vector<Tally> buffer;
+    tx0 = x0 >> TileGrid::kShift, ty0 = y0 >> TileGrid::kShift, tw = (x1 >> TileGrid::kShift) - tx0 + 1;
+    const int th = (y1 >> TileGrid::kShift) - ty0 + 1;
+    buffer.assign(std::size_t(tw) * std::size_t(th), Tally{});
+    tally = &buffer;
+  }
+  void close_box() {
+    if (!tally) return;
+    for (std::size_t i = 0; i < tally->size(); ++i) {
+      const Tally& e = (*tally)[i];
+      if (e.writes == 0) continue;
+      const int x = (tx0 + int(i % std::size_t(tw))) << TileGrid::kShift, y = (ty0 + int(i / std::size_t(tw))) << TileGrid::kShift;
+      if (owned->grid.has(x, y) && owned->chart[owned->grid.at(x, y)] >= 0)
+        owned->first_writes(owned->grid.at(x, y), e.writes, e.key);
+    }
+    tally = nullptr;
   }
 };
 
@@ -717,6 +768,8 @@ struct KeySink {
 struct SampleSink {
   std::vector<BlendSample>& out;
   const OwnedTiles* owned_tiles() const { return nullptr; }
+  void open_box(int, int, int, int) {}
+  void close_box() {}
   void prefetch(int32_t) const {}
   bool taken(int32_t, uint64_t) const { return false; }
   void put(int32_t idx, int, int, uint64_t key, double u, double v, double w) {
