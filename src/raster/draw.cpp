@@ -498,14 +498,11 @@ struct OwnedTiles {
         }
     }, 8);
   }
-  // A texel of pixel (x, y) got its first key.
-  void first_write(int x, int y, uint64_t key) {
+  // `n` texels of the tile of pixel (x, y) got their first keys, the largest `key`.
+  void first_write(int x, int y, uint64_t key, uint32_t n = 1) {
     if (!grid.has(x, y)) return;
     const std::size_t t = grid.at(x, y);
-    if (chart[t] >= 0) first_writes(t, 1, key);
-  }
-  // `n` texels of pure tile t got their first keys, the largest `key`.
-  void first_writes(std::size_t t, uint32_t n, uint64_t key) {
+    if (chart[t] < 0) return;
     uint64_t cur = max_key[t].load(std::memory_order_relaxed);
     while (cur < key && !max_key[t].compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
     }
@@ -757,8 +754,7 @@ struct KeySink {
       const Tally& e = (*tally)[i];
       if (e.writes == 0) continue;
       const int x = (tx0 + int(i % std::size_t(tw))) << TileGrid::kShift, y = (ty0 + int(i / std::size_t(tw))) << TileGrid::kShift;
-      if (owned->grid.has(x, y) && owned->chart[owned->grid.at(x, y)] >= 0)
-        owned->first_writes(owned->grid.at(x, y), e.writes, e.key);
+      owned->first_write(x, y, e.key, e.writes);
     }
     tally = nullptr;
   }
