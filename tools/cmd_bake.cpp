@@ -215,6 +215,11 @@ void add_bake_options(CLI::App& cmd, BakeCli& c) {
                  "Patch states kept in --out: the last N frames' (all, last = 1, none = 0: no --resume)")
       ->capture_default_str()
       ->group("Output");
+  cmd.add_flag("--write-behind", o.background_write,
+               "Write each frame's files on another thread while the next frame computes (the same files; one "
+               "more frame of images in memory, and a frame's stats line comes after the next frame's "
+               "computation)")
+      ->group("Output");
   cmd.add_flag("--aov", o.aov, "Also write NAME.aov.N.exr: patch_id, u, v, w per texel")->group("Output");
   cmd.add_flag("--dump-patches", o.dump_patches, "Also write the patches of every frame as NAME.patches.N.ply")
       ->group("Output");

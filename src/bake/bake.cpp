@@ -397,6 +397,12 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       // place together, the OBJ last (the state, for `lapflow track`); its
       // stats line follows.
       record_frame_stats(cur, tracked, patches, st, !o.track_only);
+      // The next frame reads only this one's number, mesh and velocity: its
+      // raster buffers and tracking atlas go now, not when the next frame
+      // replaces it as `prev` (about 570 MB at 6144² that the next frame's
+      // own buffers would otherwise come on top of).
+      cur.raster = RasterBuffers{};
+      cur.tracking_atlas = SurfaceAtlas{};
       stop_if_asked(writer);
       writer.write(frame, patches, frame_clock.total());
       prev = frame;

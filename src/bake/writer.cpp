@@ -195,6 +195,9 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
     job->textures.displacement = Image();
   }
   job->atlas = std::move(frame->atlas);
+  // The OBJ needs the charts and corner uvs, not the texel map (16 bytes a
+  // chart texel: 464 MB at 6144²), which no later step reads either.
+  job->atlas.texels = TexelMap{};
   job->surface = frame;
   if (options_.dump_patches) job->patches = patches;
   if (options_.keep_states != 0 || options_.track_only) {

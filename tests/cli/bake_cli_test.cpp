@@ -381,6 +381,42 @@ TEST(BakeCliOutput, AWriteErrorMidBakeIsExit2NamingTheFileWithEarlierFramesIntac
   EXPECT_EQ(lines_in(out / "t.stats.jsonl"), 2u);
 }
 
+// --write-behind writes a frame's files while the next one computes: the
+// same files, and a failed write still ends the bake with exit 2 naming the
+// file, the frames before it whole and no temporary left.
+TEST(BakeCliOutput, WriteBehindGivesTheSameFilesAndNamesAFailedWrite) {
+  TempDir meshes("behind_in"), ref("behind_ref"), same("behind_same"), out("behind_out");
+  write_demo_frames(meshes.str(), 1, 2, 1.0 / 20);
+  write_demo_frames(meshes.str(), 3, 3, 1.0 / 80);
+  const auto bake_args = [](const std::string& in, const std::string& to, bool behind) {
+    std::vector<std::string> args = ::bake_args(in, to, false);
+    args.insert(args.end(), {"--keep-states", "none"});
+    if (behind) args.push_back("--write-behind");
+    return args;
+  };
+  const Result full = run_lapflow(bake_args(meshes.str(), ref.str(), false), meshes);
+  ASSERT_EQ(full.exit_code, 0) << full.err;
+  const Result behind = run_lapflow(bake_args(meshes.str(), same.str(), true), meshes);
+  ASSERT_EQ(behind.exit_code, 0) << behind.err;
+  EXPECT_EQ(expect_whole_frames_identical_to(same.str(), ref.str(), 3, kFrameFilesNoAov), (std::vector<int>{1, 2, 3}));
+  EXPECT_EQ(lines_in(same / "t.stats.jsonl"), 3u);
+
+  std::uintmax_t earlier = 0;
+  for (const auto& e : fs::directory_iterator(ref.str()))
+    if (e.path().filename().string().find(".0003.") == std::string::npos) earlier = std::max(earlier, e.file_size());
+  const std::uintmax_t obj3 = fs::file_size(frame_file(ref.str(), kFrameFiles[0], 3));
+  ASSERT_GT(obj3, 2 * earlier) << "frame 3's OBJ must be the only file over the limit";
+  const Result r =
+      run_lapflow(bake_args(meshes.str(), out.str(), true), meshes, {.file_size = long(earlier + obj3) / 2});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find(frame_file(out.str(), kFrameFiles[0], 3) + ": write failed: File too large"), std::string::npos)
+      << r.err;
+  EXPECT_EQ(expect_whole_frames_identical_to(out.str(), ref.str(), 3, kFrameFilesNoAov), (std::vector<int>{1, 2}));
+  for (const char* kind : kFrameFiles) EXPECT_FALSE(fs::exists(frame_file(out.str(), kind, 3))) << kind;
+  EXPECT_TRUE(temporaries_in(out.str()).empty());
+  EXPECT_EQ(lines_in(out / "t.stats.jsonl"), 2u);
+}
+
 TEST(BakeCliInput, AHugeNumberInAnObjGivesOneShortLineNamingTheFile) {
   TempDir dir("long_number");
   test::write_bytes(dir / "m.0001.obj", "v 0 0 0\nv " + std::string(5'000'000, '7') + " 0 0\nv 0 1 0\nf 1 2 3\n");
