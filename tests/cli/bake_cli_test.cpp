@@ -352,17 +352,26 @@ TEST(BakeCliOutput, ReadOnlyOutIsExit2NamingIt) {
 // frames 1-2 stay as an uninterrupted bake wrote them, frame 3 has no file
 // and no temporary file is left. lapflow ignores SIGXFSZ itself, so the
 // limit makes write() fail with EFBIG instead of killing it.
-TEST(BakeCliOutput, AWriteErrorMidBakeIsExit2NamingTheFileWithEarlierFramesIntact) {
-  TempDir meshes("fsize_in"), ref("fsize_ref"), out("fsize_out");
+namespace {
+
+/// Frames 1-2 small and frame 3 large, so that a file-size limit can stop
+/// the bake at frame 3's OBJ alone. `tag` names the temporary folders;
+/// `extra` goes to the limited bake only (the reference bakes without it).
+/// The bake is exit 2 naming that OBJ, frames 1-2 are whole and identical
+/// to the unlimited bake's, frame 3 has no file, no temporary is left and
+/// the stats have two lines.
+void expect_a_failed_write_keeps_earlier_frames(const std::string& tag, const std::vector<std::string>& extra) {
+  TempDir meshes(tag + "_in"), ref(tag + "_ref"), out(tag + "_out");
   write_demo_frames(meshes.str(), 1, 2, 1.0 / 20);
   write_demo_frames(meshes.str(), 3, 3, 1.0 / 80);
   // No state files: they are larger than the OBJs (docs/bake.md).
-  const auto bake_args = [](const std::string& in, const std::string& to, bool aov) {
-    std::vector<std::string> args = ::bake_args(in, to, aov);
+  const auto bake_args = [](const std::string& in, const std::string& to, const std::vector<std::string>& more) {
+    std::vector<std::string> args = ::bake_args(in, to, false);
     args.insert(args.end(), {"--keep-states", "none"});
+    args.insert(args.end(), more.begin(), more.end());
     return args;
   };
-  const Result full = run_lapflow(bake_args(meshes.str(), ref.str(), false), meshes);
+  const Result full = run_lapflow(bake_args(meshes.str(), ref.str(), {}), meshes);
   ASSERT_EQ(full.exit_code, 0) << full.err;
   std::uintmax_t earlier = 0;
   for (const auto& e : fs::directory_iterator(ref.str()))
@@ -371,7 +380,7 @@ TEST(BakeCliOutput, AWriteErrorMidBakeIsExit2NamingTheFileWithEarlierFramesIntac
   ASSERT_GT(obj3, 2 * earlier) << "frame 3's OBJ must be the only file over the limit";
 
   const Result r =
-      run_lapflow(bake_args(meshes.str(), out.str(), false), meshes, {.file_size = long(earlier + obj3) / 2});
+      run_lapflow(bake_args(meshes.str(), out.str(), extra), meshes, {.file_size = long(earlier + obj3) / 2});
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find(frame_file(out.str(), kFrameFiles[0], 3) + ": write failed: File too large"), std::string::npos)
       << r.err;
@@ -381,40 +390,27 @@ TEST(BakeCliOutput, AWriteErrorMidBakeIsExit2NamingTheFileWithEarlierFramesIntac
   EXPECT_EQ(lines_in(out / "t.stats.jsonl"), 2u);
 }
 
+}  // namespace
+
+TEST(BakeCliOutput, AWriteErrorMidBakeIsExit2NamingTheFileWithEarlierFramesIntact) {
+  expect_a_failed_write_keeps_earlier_frames("fsize", {});
+}
+
 // --write-behind writes a frame's files while the next one computes: the
-// same files, and a failed write still ends the bake with exit 2 naming the
-// file, the frames before it whole and no temporary left.
+// same files as in line, and a failed write still ends the bake as above.
 TEST(BakeCliOutput, WriteBehindGivesTheSameFilesAndNamesAFailedWrite) {
-  TempDir meshes("behind_in"), ref("behind_ref"), same("behind_same"), out("behind_out");
-  write_demo_frames(meshes.str(), 1, 2, 1.0 / 20);
-  write_demo_frames(meshes.str(), 3, 3, 1.0 / 80);
-  const auto bake_args = [](const std::string& in, const std::string& to, bool behind) {
-    std::vector<std::string> args = ::bake_args(in, to, false);
-    args.insert(args.end(), {"--keep-states", "none"});
-    if (behind) args.push_back("--write-behind");
-    return args;
-  };
-  const Result full = run_lapflow(bake_args(meshes.str(), ref.str(), false), meshes);
-  ASSERT_EQ(full.exit_code, 0) << full.err;
-  const Result behind = run_lapflow(bake_args(meshes.str(), same.str(), true), meshes);
+  TempDir meshes("behind_in"), ref("behind_ref"), same("behind_same");
+  write_demo_frames(meshes.str(), 1, 3, 1.0 / 20);
+  const Result in_line = run_lapflow(bake_args(meshes.str(), ref.str(), false), meshes);
+  ASSERT_EQ(in_line.exit_code, 0) << in_line.err;
+  std::vector<std::string> args = bake_args(meshes.str(), same.str(), false);
+  args.push_back("--write-behind");
+  const Result behind = run_lapflow(args, meshes);
   ASSERT_EQ(behind.exit_code, 0) << behind.err;
   EXPECT_EQ(expect_whole_frames_identical_to(same.str(), ref.str(), 3, kFrameFilesNoAov), (std::vector<int>{1, 2, 3}));
   EXPECT_EQ(lines_in(same / "t.stats.jsonl"), 3u);
 
-  std::uintmax_t earlier = 0;
-  for (const auto& e : fs::directory_iterator(ref.str()))
-    if (e.path().filename().string().find(".0003.") == std::string::npos) earlier = std::max(earlier, e.file_size());
-  const std::uintmax_t obj3 = fs::file_size(frame_file(ref.str(), kFrameFiles[0], 3));
-  ASSERT_GT(obj3, 2 * earlier) << "frame 3's OBJ must be the only file over the limit";
-  const Result r =
-      run_lapflow(bake_args(meshes.str(), out.str(), true), meshes, {.file_size = long(earlier + obj3) / 2});
-  EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(r.err.find(frame_file(out.str(), kFrameFiles[0], 3) + ": write failed: File too large"), std::string::npos)
-      << r.err;
-  EXPECT_EQ(expect_whole_frames_identical_to(out.str(), ref.str(), 3, kFrameFilesNoAov), (std::vector<int>{1, 2}));
-  for (const char* kind : kFrameFiles) EXPECT_FALSE(fs::exists(frame_file(out.str(), kind, 3))) << kind;
-  EXPECT_TRUE(temporaries_in(out.str()).empty());
-  EXPECT_EQ(lines_in(out / "t.stats.jsonl"), 2u);
+  expect_a_failed_write_keeps_earlier_frames("behind_fsize", {"--write-behind"});
 }
 
 TEST(BakeCliInput, AHugeNumberInAnObjGivesOneShortLineNamingTheFile) {
