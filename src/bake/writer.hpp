@@ -19,8 +19,9 @@ class FrameWriter {
   /// whose frames are written by many processes at once, keeps none).
   FrameWriter(const BakeOptions& options, const BakeManifest& names, std::function<void(const FrameStats&)> on_frame,
               bool stats_file = true);
-  /// Takes the frame's textures and atlas (moved out of `frame`; the mesh is
-  /// shared) and writes its files. `compute_seconds` is the wall time the
+  /// Takes the frame's textures and atlas (moved out of `frame`, the atlas
+  /// without its texel map, which the files do not need; the mesh is shared)
+  /// and writes its files. `compute_seconds` is the wall time the
   /// frame took before writing. With BakeOptions::background_write the files
   /// are written while the caller goes on (at most one frame in flight);
   /// otherwise they are on disk when this returns.

@@ -347,19 +347,15 @@ TEST(BakeCliOutput, ReadOnlyOutIsExit2NamingIt) {
   EXPECT_TRUE(fs::is_empty(dir / "ro"));
 }
 
-// A write that fails mid-bake (here a file-size limit: frame 3's OBJ is
-// more than twice as large as any earlier file, without state files) is exit 2 naming the file;
-// frames 1-2 stay as an uninterrupted bake wrote them, frame 3 has no file
-// and no temporary file is left. lapflow ignores SIGXFSZ itself, so the
-// limit makes write() fail with EFBIG instead of killing it.
 namespace {
 
-/// Frames 1-2 small and frame 3 large, so that a file-size limit can stop
-/// the bake at frame 3's OBJ alone. `tag` names the temporary folders;
+/// A write that fails mid-bake (here a file-size limit: frame 3's OBJ is more
+/// than twice as large as any earlier file, without state files) is exit 2
+/// naming the file; frames 1-2 stay as an uninterrupted bake wrote them,
+/// frame 3 has no file, no temporary file is left and the stats have two
+/// lines. lapflow ignores SIGXFSZ itself, so the limit makes write() fail
+/// with EFBIG instead of killing it. `tag` names the temporary folders;
 /// `extra` goes to the limited bake only (the reference bakes without it).
-/// The bake is exit 2 naming that OBJ, frames 1-2 are whole and identical
-/// to the unlimited bake's, frame 3 has no file, no temporary is left and
-/// the stats have two lines.
 void expect_a_failed_write_keeps_earlier_frames(const std::string& tag, const std::vector<std::string>& extra) {
   TempDir meshes(tag + "_in"), ref(tag + "_ref"), out(tag + "_out");
   write_demo_frames(meshes.str(), 1, 2, 1.0 / 20);
