@@ -58,6 +58,55 @@ inline const uint64_t* rest_ground(const RasterContext& ctx, std::size_t p) {
   return &ctx.rest_ground[std::size_t(ctx.rest_ground_slot[p]) * kHeldWords];
 }
 
+}  // namespace
+
+// Which of the erosion tests (keeps, keeps_held) every texel of a patch
+// triangle passes, told from bounds over the triangle alone: the feature map's
+// minimum under the bilinear taps of its uv box (MinPyramid), D's minimum at
+// the box's corner farthest from the centre, w's at a vertex. Each texel's
+// test computes f >= that minimum, D and w no lower than theirs, and every
+// step of the test is monotone in them, so when the bound passes, so does
+// every texel: the same decisions, without a feature-map lookup per texel.
+// The slack covers the texels' barycentrics (kInsideTol outside the
+// triangle) and the bilinear weights' rounding.
+uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3], double slope) {
+  if (ctx.mode != RasterMode::Erosion || ctx.erosion_min.empty()) return 0;
+  constexpr double kUvSlack = 1e-7, kWSlack = 1e-6, kFScale = 1 - 1e-5;
+  const double ua = std::min({uv[0].x, uv[1].x, uv[2].x}) - kUvSlack, ub = std::max({uv[0].x, uv[1].x, uv[2].x}) + kUvSlack;
+  const double va = std::min({uv[0].y, uv[1].y, uv[2].y}) - kUvSlack, vb = std::max({uv[0].y, uv[1].y, uv[2].y}) + kUvSlack;
+  if (!(ua >= 0 && ub <= 1 && va >= 0 && vb <= 1)) return 0;  // keeps rejects (u, v) off the square
+  const double w_min = double(std::min({w[0], w[1], w[2]})) - kWSlack;
+  const double dx = std::max(std::abs(ua - 0.5), std::abs(ub - 0.5)), dy = std::max(std::abs(va - 0.5), std::abs(vb - 0.5));
+  const double d_max = std::sqrt(dx * dx + dy * dy) * (1 + 1e-12) + 1e-12;
+  const double D_min = std::max(0.0, 1.0 - d_max / 0.5) - 1e-9;
+  // The pixels bilinear() reads for u in [ua, ub], v in [va, vb].
+  auto f_min = [&](const MinPyramid& m, const Image& img) {
+    const int W = img.width, H = img.height;
+    const int x0 = int(std::clamp(ua * W - 0.5, 0.0, double(W - 1)));
+    const int x1 = std::min(int(std::clamp(ub * W - 0.5, 0.0, double(W - 1))) + 1, W - 1);
+    const int y0 = int(std::clamp((1.0 - vb) * H - 0.5, 0.0, double(H - 1)));
+    const int y1 = std::min(int(std::clamp((1.0 - va) * H - 0.5, 0.0, double(H - 1))) + 1, H - 1);
+    return double(m.min_over(x0, y0, x1, y1)) * kFScale;
+  };
+  uint8_t sure = 0;
+  {
+    const ErosionMap& map = ctx.erosion;
+    const double f = f_min(ctx.erosion_min, map.feature);
+    if (f >= 0 && std::sqrt(f + std::max(0.0, D_min)) * map.inv_max - map.epsilon >= 1.0 - w_min) sure |= kSureKeeps;
+  }
+  if (ctx.hold && !ctx.held_min.empty()) {
+    const ErosionMap& held = ctx.held_erosion;
+    const double r = ctx.held_reach;
+    const double f = f_min(ctx.held_min, held.feature);
+    const double D = std::min(1.0, std::max(0.0, D_min) + 2 * r);
+    if (f >= 0 && std::sqrt(f + D) * held.inv_max - held.epsilon >= 1.0 - std::min(1.0, w_min + slope * r) - ctx.options.hold_margin)
+      sure |= kSureHeld;
+  }
+  return sure;
+}
+
+namespace {
+
 // Chart texel i at pixel (x, y) has its 3x3 neighbourhood in its own chart.
 // Only such texels mark held cells (resolve_texels), so the cells of a won
 // region stop about a texel short of its chart's border.
@@ -80,13 +129,15 @@ bool interior_texel(const RasterContext& ctx, std::size_t i, int x, int y) {
 // chart's border, where no texel marks a cell.
 // w is linear on the patch triangle: `slope` is its gradient's length in
 // uv, so w + slope x reach bounds w within the reach (weight_slope).
+// `sure` (sure_passes) says where the answer is known for the whole triangle.
 inline bool passes(const RasterContext& ctx, const Patch& patch, const uint64_t* ground, int32_t idx, int x, int y,
-                   double u, double v, double w, double slope) {
+                   double u, double v, double w, double slope, uint8_t sure = 0) {
   if (ctx.hold && held_at(patch.held, u, v)) {
+    if (sure & kSureHeld) return true;
     const double r = ctx.held_reach;
     return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
-  if (!keeps(ctx.erosion, u, v, w, ctx.mode)) return false;
+  if (!(sure & kSureKeeps) && !keeps(ctx.erosion, u, v, w, ctx.mode)) return false;
   return !ground || held_at(ground, u, v) || !interior_texel(ctx, std::size_t(idx), x, y);
 }
 
@@ -532,6 +583,9 @@ struct ChartTriangle {
   Vec2 uv[3];
   float w[3];
   float slope = 0;  // weight_slope (hold only)
+  // sure_passes, worked out at the first texel that needs the test (many
+  // triangles have none: older patches keep all their texels).
+  mutable uint8_t sure = kSureUnknown;
   int x0, y0, x1, y1;  // pixel bbox, clamped to the atlas
   bool ring = false;   // test the pixels around it for a seam (see rasterize_patch)
 };
@@ -699,7 +753,8 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
-      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, t.slope)) continue;
+      if (t.sure == kSureUnknown) t.sure = sure_passes(ctx, t.uv, t.w, t.slope);
+      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, t.slope, t.sure)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
@@ -959,7 +1014,9 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const
     const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
     ctx.held_erosion = exemplar.erosion;
     ctx.held_erosion.feature = max_filter(F, kx, ky);
+    ctx.held_min.build(ctx.held_erosion.feature);
   }
+  if (options.mode == RasterMode::Erosion) ctx.erosion_min.build(exemplar.erosion.feature);
   st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
   if (options.mode == RasterMode::Blend) {
     ctx.blend.mips = &exemplar.mips;

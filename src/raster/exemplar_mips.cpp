@@ -7,6 +7,7 @@
 
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/raster/raster.hpp"
+#include "raster/internal.hpp"
 #include "raster/sampling.hpp"
 
 namespace lapflow {
@@ -114,6 +115,39 @@ Image max_filter(const Image& img, int kx, int ky) {
   else
     out = std::move(tmp);
   return out;
+}
+
+void MinPyramid::build(const Image& img) {
+  levels.assign(1, img.pixels);
+  widths.assign(1, img.width);
+  heights.assign(1, img.height);
+  while (widths.back() > 1 || heights.back() > 1) {
+    const int w = widths.back(), h = heights.back(), W = (w + 1) / 2, H = (h + 1) / 2;
+    const std::vector<float>& in = levels.back();
+    std::vector<float> next(std::size_t(W) * H);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const int xa = 2 * x, xb = std::min(2 * x + 1, w - 1), ya = 2 * y, yb = std::min(2 * y + 1, h - 1);
+        next[std::size_t(y) * W + x] =
+            std::min({in[std::size_t(ya) * w + xa], in[std::size_t(ya) * w + xb], in[std::size_t(yb) * w + xa],
+                      in[std::size_t(yb) * w + xb]});
+      }
+    levels.push_back(std::move(next));
+    widths.push_back(W);
+    heights.push_back(H);
+  }
+}
+
+float MinPyramid::min_over(int x0, int y0, int x1, int y1) const {
+  // The level where the rectangle spans at most two blocks each way.
+  std::size_t k = 0;
+  while (k + 1 < levels.size() && ((x1 >> k) - (x0 >> k) > 1 || (y1 >> k) - (y0 >> k) > 1)) ++k;
+  const int w = widths[k];
+  const std::vector<float>& l = levels[k];
+  float m = l[std::size_t(y0 >> k) * w + std::size_t(x0 >> k)];
+  for (int y = y0 >> k; y <= (y1 >> k); ++y)
+    for (int x = x0 >> k; x <= (x1 >> k); ++x) m = std::min(m, l[std::size_t(y) * w + std::size_t(x)]);
+  return m;
 }
 
 }  // namespace detail

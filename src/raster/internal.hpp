@@ -21,6 +21,19 @@ inline uint64_t make_key(std::size_t patch_index, std::size_t triangle) {
 /// The feature map's maximum over a window of 2 kx + 1 by 2 ky + 1 pixels.
 Image max_filter(const Image& img, int kx, int ky);
 
+/// The minimum of a one-channel image over pixel rectangles: a pyramid of
+/// 2 x 2 minima, so a rectangle of side up to 2^k costs at most four lookups
+/// at level k (a bound over a slightly larger rectangle, never below the
+/// true minimum).
+struct MinPyramid {
+  std::vector<std::vector<float>> levels;  ///< level 0: the image
+  std::vector<int> widths, heights;
+  void build(const Image& img);
+  bool empty() const { return levels.empty(); }
+  /// A lower bound of the pixels in [x0, x1] x [y0, y1] (inclusive, inside the image).
+  float min_over(int x0, int y0, int x1, int y1) const;
+};
+
 /// One texel a patch triangle covers (Blend mode): chart texel, patch
 /// triangle, and the patch's (u, v, w) there.
 struct BlendSample {
@@ -98,6 +111,10 @@ struct RasterContext {
   std::size_t newborn_from = std::numeric_limits<std::size_t>::max();
   ErosionMap held_erosion;
   double held_reach = 0;
+  /// Minima of erosion.feature and held_erosion.feature (Erosion mode): a
+  /// patch triangle whose every texel passes the test is known before its
+  /// pixels are visited (draw.cpp, sure_passes).
+  MinPyramid erosion_min, held_min;
   /// RasterOptions::rest_bound: per patch index, the slot of its cells in
   /// `rest_ground` (-1: not bound: outside a render a patch that moves, or
   /// one with no held cell), and there kHeldWords words per bound patch: its
@@ -143,6 +160,15 @@ struct OwnedTiles;
 /// `owned`: see OwnedTiles (draw_patches only; it must see every write).
 void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters,
                      OwnedTiles* owned = nullptr);
+
+/// sure_passes: every texel of a patch triangle passes the erosion test
+/// (keeps, kSureKeeps) or the held test (keeps_held, kSureHeld).
+inline constexpr uint8_t kSureKeeps = 1, kSureHeld = 2, kSureUnknown = 255;
+/// Which erosion tests every texel of the patch triangle with rest uv `uv`,
+/// weights `w` and weight slope `slope` (the held test's) passes, from bounds
+/// over the triangle alone: the same decisions as the texels' own tests
+/// wherever it says so, and 0 outside RasterMode::Erosion.
+uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3], double slope);
 
 /// Blend mode: the samples of one patch (any order, duplicates allowed; the
 /// lowest patch triangle of each texel counts) added to ctx.blend (phase 1)

@@ -14,6 +14,7 @@
 #include "lapflow/raster/raster.hpp"
 #include "raster/raster_fixture.hpp"
 #include "raster/internal.hpp"
+#include "raster/sampling.hpp"
 
 namespace lapflow {
 namespace {
@@ -821,6 +822,96 @@ TEST(Raster, MaxFilterIsTheWindowMaximum) {
         ASSERT_EQ(m.at(x, y, 0), want) << "kx " << kx << " ky " << ky << " at " << x << "," << y;
       }
   }
+}
+
+}  // namespace
+}  // namespace lapflow
+
+namespace lapflow {
+namespace {
+
+// The feature map's minima over rectangles (MinPyramid) bound every pixel
+// of the rectangle from below and are exact for one pixel and for the whole
+// image, on a random image whose sizes are not powers of two.
+TEST(Raster, MinPyramidBoundsEveryRectangleFromBelow) {
+  Image img(37, 23, 1);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = float(hash_to_unit(hash64(11, i)));
+  detail::MinPyramid m;
+  m.build(img);
+  float all = 1;
+  for (float f : img.pixels) all = std::min(all, f);
+  EXPECT_EQ(m.min_over(0, 0, img.width - 1, img.height - 1), all);
+  for (int k = 0; k < 3000; ++k) {
+    int x0 = int(hash_to_unit(hash64(12, k, 0)) * img.width), x1 = int(hash_to_unit(hash64(12, k, 1)) * img.width);
+    int y0 = int(hash_to_unit(hash64(12, k, 2)) * img.height), y1 = int(hash_to_unit(hash64(12, k, 3)) * img.height);
+    if (k % 4 == 0) x1 = x0, y1 = y0;  // single pixels: exact
+    if (x0 > x1) std::swap(x0, x1);
+    if (y0 > y1) std::swap(y0, y1);
+    float want = 1;
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) want = std::min(want, img.at(x, y, 0));
+    const float got = m.min_over(x0, y0, x1, y1);
+    ASSERT_LE(got, want) << x0 << "," << y0 << " - " << x1 << "," << y1;
+    if (x0 == x1 && y0 == y1) ASSERT_EQ(got, want) << x0 << "," << y0;
+  }
+}
+
+// sure_passes decides for a whole patch triangle only where every point of
+// it passes: random triangles in uv with random weights and weight slopes,
+// on a random feature map, each sampled at points inside, on its edges and
+// just outside them (the draw's barycentric tolerance), with the texels' own
+// tests (keeps, keeps_held). Both bounds must also say yes somewhere.
+TEST(Raster, SureErosionTestsHoldAtEveryPointOfTheirTriangle) {
+  Scene sc = ramp_plane(128, 48, 0.1);
+  for (std::size_t i = 0; i < sc.ex.feature.pixels.size(); ++i)
+    sc.ex.feature.pixels[i] = float(hash_to_unit(hash64(21, i)) * hash_to_unit(hash64(22, i)));
+  sc.rex = prepared(sc.ex);
+  RasterOptions o;
+  o.radius = sc.r;
+  ASSERT_TRUE(o.hold);
+  ASSERT_EQ(o.mode, RasterMode::Erosion);
+  RasterBuffers r = begin_raster(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{});
+  const detail::RasterContext& ctx = *r.context;
+  ASSERT_TRUE(ctx.hold);
+  std::size_t sure_keeps = 0, sure_held = 0, neither = 0;
+  for (int k = 0; k < 4000; ++k) {
+    auto h = [&](int j) { return hash_to_unit(hash64(23, k, j)); };
+    const double size = 0.005 + 0.3 * h(0) * h(1);
+    const Vec2 c{size + (1 - 2 * size) * h(2), size + (1 - 2 * size) * h(3)};
+    Vec2 uv[3];
+    float w[3];
+    for (int i = 0; i < 3; ++i) {
+      uv[i] = c + Vec2{(2 * h(4 + i) - 1) * size, (2 * h(7 + i) - 1) * size};
+      w[i] = float(k % 5 == 0 ? 1.0 : h(10 + i));
+    }
+    const double slope = 2 * h(13);
+    const uint8_t sure = detail::sure_passes(ctx, uv, w, slope);
+    sure_keeps += (sure & detail::kSureKeeps) != 0;
+    sure_held += (sure & detail::kSureHeld) != 0;
+    neither += sure == 0;
+    if (sure == 0) continue;
+    for (int s = 0; s < 200; ++s) {
+      // Barycentrics: inside, on an edge, at a vertex, or 1e-9 outside.
+      double l1 = hash_to_unit(hash64(24, k, s, 0)), l2 = hash_to_unit(hash64(24, k, s, 1));
+      if (l1 + l2 > 1) l1 = 1 - l1, l2 = 1 - l2;
+      if (s % 4 == 1) l2 = 1 - l1;
+      if (s % 4 == 2) l1 = -1e-9, l2 = s % 8 == 2 ? -1e-9 : l2;
+      if (s == 3) l1 = 1, l2 = 0;
+      const double l0 = 1.0 - l1 - l2;
+      const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
+      const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
+      const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
+      if (sure & detail::kSureKeeps)
+        ASSERT_TRUE(detail::keeps(ctx.erosion, u, v, wt, ctx.mode)) << "triangle " << k << " point " << s;
+      if (sure & detail::kSureHeld)
+        ASSERT_TRUE(detail::keeps_held(ctx.held_erosion, ctx.held_reach, o.hold_margin, u, v,
+                                       std::min(1.0, wt + slope * ctx.held_reach)))
+            << "triangle " << k << " point " << s;
+    }
+  }
+  EXPECT_GT(sure_keeps, 100u);
+  EXPECT_GT(sure_held, 100u);
+  EXPECT_GT(neither, 100u);
 }
 
 }  // namespace
