@@ -79,13 +79,9 @@ Plane make_plane(int g, int blocks, int N, int gutter) {
           if (!(q.x >= 0 && q.y >= 0 && q.x < cells * h && q.y < cells * h)) continue;
           const double px = q.x + bi * cells * h, py = q.y + bj * cells * h;
           const int t = P.locate(px, py);
-          const int ci = (t / 2) % g, cj = (t / 2) / g;
-          const double fx = px / h - ci, fy = py / h - cj;
           rows[y].push_back(tmp.texel.size());
           tmp.texel.push_back(uint32_t(y * N + x));
           tmp.triangle.push_back(t);
-          tmp.b1.push_back(float(t % 2 == 0 ? fx - fy : fx));
-          tmp.b2.push_back(float(t % 2 == 0 ? fy : fy - fx));
         }
     }
   TexelMap& tm = A.texels;
@@ -94,8 +90,6 @@ Plane make_plane(int g, int blocks, int N, int gutter) {
     for (std::size_t k : row) {
       tm.texel.push_back(tmp.texel[k]);
       tm.triangle.push_back(tmp.triangle[k]);
-      tm.b1.push_back(tmp.b1[k]);
-      tm.b2.push_back(tmp.b2[k]);
     }
   }
   return P;

@@ -146,7 +146,7 @@ void add_atlas_command(CLI::App& app) {
   cmd->add_option("--out", o->out, "Output OBJ; the MTL is written beside it with the extension .mtl")->required();
   cmd->add_option("--resolution", o->atlas.resolution,
                   "Atlas width = height in texels; refused (exit 2) before any texel is allocated when its "
-                  "buffers (about 18 bytes per texel, 39 with --texels) do not fit --max-memory")
+                  "buffers (about 12 bytes per texel, 33 with --texels) do not fit --max-memory")
       ->check(CLI::Range(16, 65536))
       ->capture_default_str();
   cmd->add_option("--gutter", o->atlas.gutter,

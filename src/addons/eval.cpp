@@ -260,7 +260,9 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
       const uint32_t texel = f.texels.texel[i];
       f.slot[texel] = int32_t(i);
       const Tri& t = mesh.triangles[f.texels.triangle[i]];
-      const double b1 = f.texels.b1[i], b2 = f.texels.b2[i];
+      float fb1, fb2;
+      texel_barycentrics(f.uv.corner_uv, f.n, texel, f.texels.triangle[i], fb1, fb2);
+      const double b1 = fb1, b2 = fb2;
       f.position[i] = mesh.positions[t[0]] * (1 - b1 - b2) + mesh.positions[t[1]] * b1 + mesh.positions[t[2]] * b2;
       const int x = int(texel % uint32_t(f.n)), y = int(texel / uint32_t(f.n));
       const float id = aov.at(x, y, c_id);
@@ -282,7 +284,9 @@ Vec3 velocity_at(const FrameData& f, std::size_t i, const Vec3& p) {
   if (f.grid) return f.grid->sample(p);
   if (f.vertex_velocity.empty()) return {};
   const Tri& t = f.uv.mesh.triangles[f.texels.triangle[i]];
-  const double b1 = f.texels.b1[i], b2 = f.texels.b2[i];
+  float fb1, fb2;
+  texel_barycentrics(f.uv.corner_uv, f.n, f.texels.texel[i], f.texels.triangle[i], fb1, fb2);
+  const double b1 = fb1, b2 = fb2;
   return f.vertex_velocity[t[0]] * (1 - b1 - b2) + f.vertex_velocity[t[1]] * b1 + f.vertex_velocity[t[2]] * b2;
 }
 

@@ -867,14 +867,12 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
   for (int k = 0; k < bands; ++k) count[k + 1] += count[k];
   TexelMap map;
   const std::size_t total = count[bands];
-  // The four arrays are first touched by different tasks (page faults of
+  // The two arrays are first touched by different tasks (page faults of
   // hundreds of megabytes at 4096^2 are a large part of the cost).
-  parallel_for(4, [&](std::size_t b, std::size_t e) {
+  parallel_for(2, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       if (i == 0) map.texel.resize(total);
       if (i == 1) map.triangle.resize(total);
-      if (i == 2) map.b1.resize(total);
-      if (i == 3) map.b2.resize(total);
     }
   }, 1);
   parallel_for(std::size_t(bands), [&](std::size_t b, std::size_t e) {
@@ -882,11 +880,7 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
       std::vector<int32_t> owner = std::move(owners[k]);
       const int row0 = int(k) * kBand;
       std::size_t out = count[k];
-      // Row by row (no division per texel); a run of texels of one triangle
-      // reuses its corners.
-      int32_t last = -1;
-      Vec2 a, bb, c;
-      double area2 = 0;
+      // Row by row (no division per texel).
       const std::size_t rows = owner.size() / std::size_t(n);
       for (std::size_t r = 0; r < rows; ++r) {
         const std::size_t y = std::size_t(row0) + r;
@@ -894,19 +888,8 @@ TexelMap build_texel_map(const std::vector<Vec2>& corner_uv, int resolution) {
         for (std::size_t x = 0; x < std::size_t(n); ++x) {
           const int32_t t = row[x];
           if (t == INT32_MAX) continue;
-          if (t != last) {
-            a = corner_uv[3 * std::size_t(t)] * n, bb = corner_uv[3 * std::size_t(t) + 1] * n,
-            c = corner_uv[3 * std::size_t(t) + 2] * n;
-            area2 = cross(bb - a, c - a);
-            last = t;
-          }
-          const Vec2 p{x + 0.5, double(n - 1 - y) + 0.5};
-          const double w1 = std::clamp(cross(a - c, p - c) / area2, 0.0, 1.0);
-          const double w2 = std::clamp(cross(bb - a, p - a) / area2, 0.0, 1.0 - w1);
           map.texel[out] = uint32_t(y * n + x);
           map.triangle[out] = t;
-          map.b1[out] = float(w1);
-          map.b2[out] = float(w2);
           ++out;
         }
       }

@@ -31,10 +31,9 @@ constexpr double kAtlasTexelBytes = 4 + 16 + 4 + 8 + 2;
 // --aov: patch_id u v w as float.
 constexpr double kAovTexelBytes = 16;
 // ---- per chart texel (a share kUtilization of the atlas) --------------------
-// The texel map (texel, triangle, two barycentrics) of this frame and of the
-// next one, read ahead (2 x 16); the raster's keys (8), flags (1) and hole
-// labels (4).
-constexpr double kChartTexelBytes = 2 * 16 + 8 + 1 + 4;
+// The texel map (texel, triangle) of this frame and of the next one, read
+// ahead (2 x 8); the raster's keys (8), flags (1) and hole labels (4).
+constexpr double kChartTexelBytes = 2 * 8 + 8 + 1 + 4;
 // Blend mode's fixed-point sums (5 x 8) and best weights (8).
 constexpr double kBlendChartTexelBytes = 48;
 // Chart texels / atlas texels: since issue 15's denser packing the shared
@@ -220,10 +219,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
 
 double estimate_atlas_memory(std::size_t triangles, int resolution, bool texels_png) {
   const double n2 = double(resolution) * double(resolution);
-  // The texel map (16 bytes per chart texel, at most every texel) and its
-  // raster bands: 18 (measured: 1,173 MiB at 8192² on dam_break); with
-  // --texels the float RGB image (12) and its 8- and 16-bit copies (3 + 6).
-  return kBaseBytes + kTriangleBytes * double(triangles) + n2 * (18 + (texels_png ? 21 : 0));
+  // The texel map (8 bytes per chart texel, at most every texel) and its
+  // raster bands (4 per texel): 12; with --texels the float RGB image (12)
+  // and its 8- and 16-bit copies (3 + 6).
+  return kBaseBytes + kTriangleBytes * double(triangles) + n2 * (12 + (texels_png ? 21 : 0));
 }
 
 void check_image_budget(const std::string& path, const ImageHeader& h, double bytes_per_pixel, std::size_t budget) {

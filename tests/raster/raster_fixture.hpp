@@ -36,7 +36,9 @@ struct PlaneFixture {
   /// Surface point of chart texel k of the texel map.
   Vec3 texel_point(std::size_t k) const {
     const Tri& t = mesh.triangles[atlas.texels.triangle[k]];
-    const double b1 = atlas.texels.b1[k], b2 = atlas.texels.b2[k];
+    float fb1, fb2;
+    texel_barycentrics(atlas.corner_uv, atlas.resolution, atlas.texels.texel[k], atlas.texels.triangle[k], fb1, fb2);
+    const double b1 = fb1, b2 = fb2;
     return mesh.positions[t[0]] * (1 - b1 - b2) + mesh.positions[t[1]] * b1 + mesh.positions[t[2]] * b2;
   }
 };
@@ -84,17 +86,8 @@ inline PlaneFixture make_plane(int g, double L, int N, bool split) {
         const double x0 = chart == 1 ? 0.5 * L : 0, x1 = split && chart == 0 ? 0.5 * L : L;
         if (!(q.x >= x0 && q.x < x1 && q.y >= 0 && q.y < L)) continue;
         const int t = f.locate(q.x, q.y);
-        const int i = (t / 2) % g, j = (t / 2) / g;
-        const double fx = q.x / f.h() - i, fy = q.y / f.h() - j;
         A.texels.texel.push_back(uint32_t(y * N + x));
         A.texels.triangle.push_back(t);
-        if (t % 2 == 0) {
-          A.texels.b1.push_back(float(fx - fy));
-          A.texels.b2.push_back(float(fy));
-        } else {
-          A.texels.b1.push_back(float(fx));
-          A.texels.b2.push_back(float(fy - fx));
-        }
       }
     }
   return f;

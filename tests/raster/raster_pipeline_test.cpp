@@ -53,9 +53,12 @@ struct SphereScene {
 };
 
 // Point of chart texel k on the sphere mesh.
-Vec3 texel_point(const TriMesh& m, const TexelMap& tm, std::size_t k) {
+Vec3 texel_point(const TriMesh& m, const SurfaceAtlas& atlas, std::size_t k) {
+  const TexelMap& tm = atlas.texels;
   const Tri& t = m.triangles[tm.triangle[k]];
-  const double b1 = tm.b1[k], b2 = tm.b2[k];
+  float fb1, fb2;
+  texel_barycentrics(atlas.corner_uv, atlas.resolution, tm.texel[k], tm.triangle[k], fb1, fb2);
+  const double b1 = fb1, b2 = fb2;
   return m.positions[t[0]] * (1 - b1 - b2) + m.positions[t[1]] * b1 + m.positions[t[2]] * b2;
 }
 
@@ -114,7 +117,7 @@ TEST(RasterPipeline, SphereFullCoverageOnePatchPerTexelOldestFirst) {
     // Brute force over the older patches on a subset of texels.
     if (k % 5 != 0) continue;
     ++checked;
-    const Vec3 p = texel_point(sc.mesh, tm, k);
+    const Vec3 p = texel_point(sc.mesh, sc.atlas, k);
     for (std::size_t i = 0; i < index_of[uint32_t(id)]; ++i)
       if (clearly_keeps(patches.patches[i], sc.rex.erosion, p, 0.02)) {
         ++older_keeps;

@@ -5,6 +5,7 @@
 /// UV convention: atlas uv (0,0) is the bottom-left corner of the image (OBJ
 /// and renderers' convention). Texel (x, y), with image row y counted from the
 /// top, has its centre at u = (x + 0.5) / N, v = 1 - (y + 0.5) / N.
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -30,13 +31,31 @@ struct AtlasOptions {
 };
 
 /// Every chart texel (centre inside a chart triangle), sorted by texel index
-/// y * N + x. The rasterizer streams these.
+/// y * N + x. The rasterizer streams these. Where in its triangle a texel
+/// lies is texel_barycentrics (8 bytes a texel fewer to build and keep: the
+/// few steps that need a texel's surface point work it out).
 struct TexelMap {
   std::vector<uint32_t> texel;      ///< y * N + x
   std::vector<int32_t> triangle;    ///< fluid triangle under the texel centre
-  std::vector<float> b1, b2;        ///< barycentric of triangle vertices 1 and 2
   std::size_t size() const { return texel.size(); }
 };
+
+/// The barycentrics (of vertices 1 and 2, as floats) of texel `texel`'s
+/// centre (y * N + x, N = `resolution`) in fluid triangle `triangle`, from
+/// the triangle's corner uvs, clamped into the triangle: what the texel map
+/// records for a chart texel.
+inline void texel_barycentrics(const std::vector<Vec2>& corner_uv, int resolution, uint32_t texel, int32_t triangle,
+                               float& b1, float& b2) {
+  const int n = resolution;
+  const std::size_t t = std::size_t(triangle);
+  const Vec2 a = corner_uv[3 * t] * n, bb = corner_uv[3 * t + 1] * n, c = corner_uv[3 * t + 2] * n;
+  const double area2 = cross(bb - a, c - a);
+  const std::size_t x = texel % uint32_t(n), y = texel / uint32_t(n);
+  const Vec2 p{x + 0.5, double(n - 1 - y) + 0.5};
+  const double w1 = std::clamp(cross(a - c, p - c) / area2, 0.0, 1.0);
+  const double w2 = std::clamp(cross(bb - a, p - a) / area2, 0.0, 1.0 - w1);
+  b1 = float(w1), b2 = float(w2);
+}
 
 struct AtlasReport {
   int charts = 0;
