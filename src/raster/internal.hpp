@@ -23,8 +23,8 @@ Image max_filter(const Image& img, int kx, int ky);
 
 /// The minimum of a one-channel image over pixel rectangles: a pyramid of
 /// 2 x 2 minima, so a rectangle of side up to 2^k costs at most four lookups
-/// at level k (a bound over a slightly larger rectangle, never below the
-/// true minimum).
+/// at level k (the minimum over a rectangle up to twice as large: never
+/// above the true minimum).
 struct MinPyramid {
   std::vector<std::vector<float>> levels;  ///< level 0: the image
   std::vector<int> widths, heights;

@@ -42,8 +42,8 @@ struct TexelMap {
 
 /// The barycentrics (of vertices 1 and 2, as floats) of texel `texel`'s
 /// centre (y * N + x, N = `resolution`) in fluid triangle `triangle`, from
-/// the triangle's corner uvs, clamped into the triangle: what the texel map
-/// records for a chart texel.
+/// the triangle's corner uvs, clamped into the triangle (the texel map
+/// stored these until stop 39; the arithmetic is the same, so are the floats).
 inline void texel_barycentrics(const std::vector<Vec2>& corner_uv, int resolution, uint32_t texel, int32_t triangle,
                                float& b1, float& b2) {
   const int n = resolution;
