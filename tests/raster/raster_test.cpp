@@ -852,7 +852,9 @@ TEST(Raster, MinPyramidBoundsEveryRectangleFromBelow) {
       for (int x = x0; x <= x1; ++x) want = std::min(want, img.at(x, y, 0));
     const float got = m.min_over(x0, y0, x1, y1);
     ASSERT_LE(got, want) << x0 << "," << y0 << " - " << x1 << "," << y1;
-    if (x0 == x1 && y0 == y1) ASSERT_EQ(got, want) << x0 << "," << y0;
+    if (x0 == x1 && y0 == y1) {
+      ASSERT_EQ(got, want) << x0 << "," << y0;
+    }
   }
 }
 
@@ -901,12 +903,14 @@ TEST(Raster, SureErosionTestsHoldAtEveryPointOfTheirTriangle) {
       const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
-      if (sure & detail::kSureKeeps)
+      if (sure & detail::kSureKeeps) {
         ASSERT_TRUE(detail::keeps(ctx.erosion, u, v, wt, ctx.mode)) << "triangle " << k << " point " << s;
-      if (sure & detail::kSureHeld)
+      }
+      if (sure & detail::kSureHeld) {
         ASSERT_TRUE(detail::keeps_held(ctx.held_erosion, ctx.held_reach, o.hold_margin, u, v,
                                        std::min(1.0, wt + slope * ctx.held_reach)))
             << "triangle " << k << " point " << s;
+      }
     }
   }
   EXPECT_GT(sure_keeps, 100u);
