@@ -389,17 +389,11 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
     const int cy0 = std::max(0, int(std::floor(fy0))), cy1 = std::min(ctx.N - 1, int(std::ceil(fy1)));
     if (cx0 > cx1 || cy0 > cy1) continue;
     if (clip && !clip->any(cx0, cy0, cx1, cy1)) continue;  // every write lands in F's box
-    const Tri& FT = ctx.mesh.triangles[F];
     const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
     const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
     draw_triangle(ctx, sink, patch, P, uv, w, key, cx0, cy0, cx1, cy1, [&](int32_t idx) {
       if (tm.triangle[idx] != F) return false;
-      float fb1, fb2;
-      texel_barycentrics(ctx.atlas.corner_uv, ctx.N, tm.texel[idx], F, fb1, fb2);
-      const double b1 = fb1, b2 = fb2;
-      const Vec3 x = ctx.mesh.positions[FT[0]] * (1 - b1 - b2) + ctx.mesh.positions[FT[1]] * b1 +
-                     ctx.mesh.positions[FT[2]] * b2;
-      return std::abs(dot(x - g.centre, g.normal)) <= g.margin;
+      return std::abs(dot(texel_position(ctx, std::size_t(idx)) - g.centre, g.normal)) <= g.margin;
     });
   }
 }
@@ -1334,12 +1328,7 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
     if (key == kNoKey || !candidate[key >> 32]) continue;
     alt[i] = kNoKey;
     clip.mark(int(tm.texel[i] % uint32_t(ctx.N)), int(tm.texel[i] / uint32_t(ctx.N)));
-    const Tri& T = ctx.mesh.triangles[tm.triangle[i]];
-    float fb1, fb2;
-    texel_barycentrics(ctx.atlas.corner_uv, ctx.N, tm.texel[i], tm.triangle[i], fb1, fb2);
-    const double b1 = fb1, b2 = fb2;
-    const auto c = cell_of(ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 +
-                           ctx.mesh.positions[T[2]] * b2);
+    const auto c = cell_of(texel_position(ctx, i));
     cells.push_back(hash64(uint64_t(c[0]), uint64_t(c[1]), uint64_t(c[2])));
   }
   std::sort(cells.begin(), cells.end());

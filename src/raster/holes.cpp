@@ -26,15 +26,9 @@ namespace lapflow::detail {
 namespace {
 
 SurfacePoint texel_surface_point(const RasterContext& ctx, std::size_t i) {
-  const TexelMap& tm = ctx.atlas.texels;
-  const int32_t F = tm.triangle[i];
-  const Tri& T = ctx.mesh.triangles[F];
-  float fb1, fb2;
-  texel_barycentrics(ctx.atlas.corner_uv, ctx.N, tm.texel[i], F, fb1, fb2);
-  const double b1 = fb1, b2 = fb2;
+  const int32_t F = ctx.atlas.texels.triangle[i];
   SurfacePoint at;
-  at.position =
-      ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 + ctx.mesh.positions[T[2]] * b2;
+  at.position = texel_position(ctx, i);
   at.normal = ctx.tri_normal[F];
   at.triangle = F;
   return at;

@@ -143,6 +143,17 @@ struct RasterContext {
       : mesh(m), atlas(a), erosion(e), mode(mo), delta_max(dm) {}
 };
 
+/// The surface point under chart texel i's centre (its fluid triangle at
+/// texel_barycentrics).
+inline Vec3 texel_position(const RasterContext& ctx, std::size_t i) {
+  const TexelMap& tm = ctx.atlas.texels;
+  const Tri& T = ctx.mesh.triangles[tm.triangle[i]];
+  float fb1, fb2;
+  texel_barycentrics(ctx.atlas.corner_uv, ctx.N, tm.texel[i], tm.triangle[i], fb1, fb2);
+  const double b1 = fb1, b2 = fb2;
+  return ctx.mesh.positions[T[0]] * (1 - b1 - b2) + ctx.mesh.positions[T[1]] * b1 + ctx.mesh.positions[T[2]] * b2;
+}
+
 /// Counters of one raster call (summed per chunk, integers only).
 struct RasterCounters {
   std::size_t seam_triangles = 0, distorted_triangles = 0, skipped_triangles = 0;
