@@ -20,6 +20,7 @@
 #include <zlib.h>
 
 #include "lapflow/core/errors.hpp"
+#include "lapflow/io/direct_file.hpp"
 
 namespace lapflow {
 namespace fs = std::filesystem;
@@ -91,14 +92,11 @@ void write_atomically(const std::string& path, const std::function<void(const st
 
 void write_text_atomically(const std::string& path, const std::string& content, StagedFiles* staged) {
   write_atomically(path, [&](const std::string& tmp) {
-    // stdio rather than a stream: errno says why a write failed.
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (!f) throw OutputError(path + ": cannot open for writing: " + std::generic_category().message(errno));
-    const bool written = std::fwrite(content.data(), 1, content.size(), f) == content.size() && std::fflush(f) == 0;
-    const int write_errno = errno;
-    const bool closed = std::fclose(f) == 0;
-    if (!written || !closed)
-      throw OutputError(path + ": write failed: " + std::generic_category().message(written ? errno : write_errno));
+    // Large contents (a frame's patch state, its OBJ) around the page cache.
+    const WholeFileResult r = write_whole_file(tmp, content.data(), content.size());
+    if (r.error != 0)
+      throw OutputError(path + (r.at_open ? ": cannot open for writing: " : ": write failed: ") +
+                        std::generic_category().message(r.error));
   }, staged);
 }
 

@@ -1,6 +1,7 @@
 // Images in and out. OpenImageIO lives here and nowhere else; the rest of
 // lapflow sees only lapflow::Image (interleaved linear float, row 0 on top).
 #include <Imath/half.h>
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imageio.h>
 #include <immintrin.h>
@@ -16,10 +17,12 @@
 #include <fstream>
 #include <memory>
 #include <mutex>
+#include <system_error>
 
 #include <fmt/format.h>
 
 #include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/direct_file.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/memory.hpp"
 #include "lapflow/io/image.hpp"
@@ -211,12 +214,63 @@ OutputError write_failure(const std::string& path, const std::string& tmp, std::
   return OutputError(path + ": write failed: " + (reason.empty() ? library_text : reason + " (" + library_text + ")"));
 }
 
-// Writes `data` (already in the file's value range) through OIIO to tmp.
+// OIIO's output through a DirectFile (around the page cache). OIIO's OpenEXR
+// writer only writes, seeks and tells, one call at a time.
+class DirectProxy final : public OIIO::Filesystem::IOProxy {
+ public:
+  explicit DirectProxy(const std::string& path) : IOProxy(path, Write), file_(path) {
+    if (!file_.ok()) m_mode = Closed;
+  }
+  const char* proxytype() const override { return "lapflow-direct"; }
+  void close() override {
+    if (m_mode == Closed) return;
+    file_.close();
+    m_mode = Closed;
+  }
+  bool seek(int64_t offset) override {
+    if (offset < 0) return false;
+    m_pos = offset;
+    return true;
+  }
+  size_t read(void*, size_t) override { return 0; }
+  size_t pread(void*, size_t, int64_t) override { return 0; }
+  size_t write(const void* buf, size_t size) override {
+    const size_t n = pwrite(buf, size, m_pos);
+    m_pos += int64_t(n);
+    return n;
+  }
+  size_t pwrite(const void* buf, size_t size, int64_t offset) override {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    return offset >= 0 && file_.write_at(buf, size, uint64_t(offset)) ? size : 0;
+  }
+  size_t size() const override { return size_t(file_.size()); }
+  const DirectFile& file() const { return file_; }
+
+ private:
+  DirectFile file_;
+  std::mutex mutex_;
+};
+
+// Writes `data` (already in the file's value range) through OIIO to tmp:
+// an EXR through a DirectProxy, unless LAPFLOW_DIRECT_IO=0.
 void write_oiio(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec,
                 OIIO::TypeDesc data_type, const void* data) {
+  std::unique_ptr<DirectProxy> proxy;  // outlives `out`, which may use it until destroyed
   auto out = OIIO::ImageOutput::create(tmp);
   if (!out) throw OutputError(path + ": " + one_line(OIIO::geterror()));
   out->threads(thread_count());
+  if (direct_io_enabled() && std::string(out->format_name()) == "openexr" && out->supports("ioproxy")) {
+    proxy = std::make_unique<DirectProxy>(tmp);
+    if (!proxy->file().ok())
+      throw OutputError(path + ": cannot open for writing: " + std::generic_category().message(proxy->file().error()));
+    if (!out->set_ioproxy(proxy.get())) throw OutputError(path + ": " + one_line(out->geterror()));
+  }
+  // The proxy's own errno, when it has one, is the reason a write failed.
+  auto failure = [&](std::string library_text) {
+    if (proxy && proxy->file().error() != 0)
+      return OutputError(path + ": write failed: " + std::generic_category().message(proxy->file().error()));
+    return write_failure(path, tmp, std::move(library_text));
+  };
   // libpng prints "libpng error: Write Error" on a full disk, as when reading.
   LibpngChatter chatter(std::string(out->format_name()) == "png");
   if (!out->open(tmp, spec)) throw OutputError(path + ": cannot open for writing: " + one_line(out->geterror()));
@@ -224,11 +278,17 @@ void write_oiio(const std::string& path, const std::string& tmp, const OIIO::Ima
     const std::string err = one_line(out->geterror());
     out->close();
     chatter.finish();
-    throw write_failure(path, tmp, err);
+    throw failure(err);
   }
-  const bool closed = out->close();
+  bool closed = out->close();
   chatter.finish();
-  if (!closed) throw write_failure(path, tmp, one_line(out->geterror()));
+  // OIIO leaves a proxy it did not open to its owner: the last block and
+  // the file's size are written here.
+  if (proxy) {
+    proxy->close();
+    closed = closed && proxy->file().error() == 0;
+  }
+  if (!closed) throw failure(one_line(out->geterror()));
 }
 
 // float -> half, round to nearest even (what Imath::half and OIIO's own
