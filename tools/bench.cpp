@@ -12,6 +12,8 @@
 //   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
 //   lapflow_bench replay DIR F [K] frame F of the bake in DIR computed again K times (default 5) from
 //                                 the previous frame's state, each step timed (tools/bench_replay.cpp)
+//   lapflow_bench write DIR F [K] frame F's EXRs and state written again K times (default 5) each way,
+//                                 direct and through the page cache, alternated (tools/bench_write.cpp)
 #include <fmt/format.h>
 
 #include <atomic>
@@ -275,6 +277,15 @@ int main(int argc, char** argv) {
       bench::bench_replay(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
     } catch (const std::exception& e) {
       fmt::print(stderr, "lapflow_bench replay: {}\n", e.what());
+      return 2;
+    }
+    return 0;
+  }
+  if (args.size() >= 3 && args[0] == "write") {
+    try {
+      bench::bench_write(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "lapflow_bench write: {}\n", e.what());
       return 2;
     }
     return 0;

@@ -51,4 +51,10 @@ void bench_obj(const std::string& data_dir);
 /// change), then the minimum and the median of each step.
 void bench_replay(const std::string& bake_dir, int frame, int repeats);
 
+/// Frame `frame` of the bake in `bake_dir` (its colour and displacement
+/// EXRs and its state) written again `rounds` times each way, with direct
+/// writes and through the page cache, alternated (tools/bench_write.cpp):
+/// wall and CPU per round, then the minimum and median of each way.
+void bench_write(const std::string& bake_dir, int frame, int rounds);
+
 }  // namespace lapflow::bench
