@@ -25,6 +25,7 @@
 #include <string>
 #include <optional>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <malloc.h>
@@ -272,20 +273,14 @@ int main(int argc, char** argv) {
     bench::bench_atlas(args.size() > 1 ? args[1] : data);
     return 0;
   }
-  if (args.size() >= 3 && args[0] == "replay") {
+  // replay and write: frame F of a finished bake, K repeats; an unreadable
+  // bake is exit 2 naming it.
+  for (const auto& [name, run] : {std::pair{"replay", &bench::bench_replay}, std::pair{"write", &bench::bench_write}}) {
+    if (args.size() < 3 || args[0] != name) continue;
     try {
-      bench::bench_replay(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
+      run(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
     } catch (const std::exception& e) {
-      fmt::print(stderr, "lapflow_bench replay: {}\n", e.what());
-      return 2;
-    }
-    return 0;
-  }
-  if (args.size() >= 3 && args[0] == "write") {
-    try {
-      bench::bench_write(args[1], std::stoi(args[2]), args.size() > 3 ? std::stoi(args[3]) : 5);
-    } catch (const std::exception& e) {
-      fmt::print(stderr, "lapflow_bench write: {}\n", e.what());
+      fmt::print(stderr, "lapflow_bench {}: {}\n", name, e.what());
       return 2;
     }
     return 0;
