@@ -86,10 +86,6 @@ bool file_size_limited() {
   return ::getrlimit(RLIMIT_FSIZE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY;
 }
 
-}  // namespace
-
-namespace {
-
 std::atomic<bool>& direct_io_switch() {
   static std::atomic<bool> on = [] {
     const char* v = std::getenv("LAPFLOW_DIRECT_IO");
