@@ -85,6 +85,34 @@ TEST(PatchesSeed, EveryComponentGetsASampleAndDistanceIsPerComponent) {
   EXPECT_GE(min_pair_distance(body), 0.3);
 }
 
+// The accepted samples are bucketed in a dense array over the mesh's box, or
+// in a hash map when that box holds too many cells: both must give the same
+// samples. Two spheres 3 apart (dense) and the same two spheres 2e5 apart
+// (the box is then 1e6 cells long: the hash map).
+TEST(PatchesSeed, FarApartComponentsSeedAsCloseOnes) {
+  auto pair = [](double gap) {
+    TriMesh m = test::icosphere(3, 1.0);
+    const TriMesh b = test::icosphere(3, 1.0, {gap, 0, 0});
+    const int base = int(m.positions.size());
+    m.positions.insert(m.positions.end(), b.positions.begin(), b.positions.end());
+    for (Tri f : b.triangles) m.triangles.push_back({f[0] + base, f[1] + base, f[2] + base});
+    return m;
+  };
+  const double d = 0.2, gap = 2e5;
+  const auto near = seed_points(pair(3.0), d, 9), far = seed_points(pair(gap), d, 9);
+  ASSERT_EQ(near.size(), far.size());
+  ASSERT_GT(near.size(), 100u);
+  const int per_sphere = 20 * 64;
+  std::vector<SurfacePoint> far_b;
+  for (std::size_t i = 0; i < near.size(); ++i) {
+    ASSERT_EQ(near[i].triangle, far[i].triangle) << i;
+    const double shift = near[i].triangle >= per_sphere ? gap - 3.0 : 0.0;
+    EXPECT_LT(norm(near[i].position + Vec3{shift, 0, 0} - far[i].position), 1e-9) << i;
+    if (far[i].triangle >= per_sphere) far_b.push_back(far[i]);
+  }
+  EXPECT_GE(min_pair_distance(far_b), d * (1 - 1e-9));
+}
+
 TEST(PatchesSeed, SameSamplesForAnyThreadCountAndDifferentForAnotherSeed) {
   const TriMesh sphere = test::icosphere(4, 1.0);
   set_thread_count(1);
