@@ -9,6 +9,7 @@
 //   lapflow_bench raster [N...]   the rasterizer alone at the given resolutions
 //   lapflow_bench atlas [DATA]    the surface atlas alone
 //   lapflow_bench patches [DATA]  the patch stages alone
+//   lapflow_bench seeding [DATA]  the per-frame fresh seeding on shared frames
 //   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
 //   lapflow_bench replay DIR F [K] frame F of the bake in DIR computed again K times (default 5) from
 //                                 the previous frame's state, each step timed (tools/bench_replay.cpp)
@@ -287,6 +288,10 @@ int main(int argc, char** argv) {
   }
   if (!args.empty() && args[0] == "obj") {
     bench::bench_obj(args.size() > 1 ? args[1] : data);
+    return 0;
+  }
+  if (!args.empty() && args[0] == "seeding") {
+    bench::bench_fresh_seeding(args.size() > 1 ? args[1] : data);
     return 0;
   }
   if (!args.empty() && args[0] == "patches") {

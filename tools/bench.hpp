@@ -30,6 +30,10 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells = 224, int
 /// present, synthetic meshes otherwise. Prints one line per measurement.
 void bench_patches(const std::string& data_dir);
 
+/// The Poisson seeding a bake runs every frame for `fresh_seeding`, timed on
+/// shared splash, dam_break and channel frames (tools/bench_patches.cpp).
+void bench_fresh_seeding(const std::string& data_dir);
+
 /// Surface atlas (issue 4, tools/bench_atlas.cpp): charts + LSCM + packing +
 /// texel map at 4096^2 on 2 threads for noisy cube-spheres of about 25k, 50k
 /// and 100k triangles (linearity) and for every 5th frame of
