@@ -9,9 +9,10 @@
 // Method: dart throwing over area-weighted random surface points, candidate i
 // drawn from hash64(seed, i) (about 40 candidates per expected sample, so the
 // chance that a disk-sized gap gets no candidate is below e^-100), accepted in
-// candidate order against a hash grid; then a maximal-coverage pass offers
-// every triangle's centroid and corners in triangle order, which fills what
-// chance left and gives tiny components their sample. Candidates are generated
+// candidate order against a grid of cells (SampleGrid); then a
+// maximal-coverage pass offers every triangle's centroid and corners in
+// triangle order, which fills what chance left and gives tiny components
+// their sample. Candidates are generated
 // in parallel by index and accepted serially, so the result is the same at any
 // thread count.
 #include <algorithm>
@@ -56,6 +57,7 @@ class SampleGrid {
   // True when no accepted sample of `component` lies closer than `d` to p.
   bool free(const Vec3& p, int component, double d2, const std::vector<Vec3>& pos,
             const std::vector<int>& comp) const {
+    auto close = [&](int s) { return comp[s] == component && norm2(pos[s] - p) < d2; };
     const auto c = cell_of(p);
     for (int64_t dz = -1; dz <= 1; ++dz)
       for (int64_t dy = -1; dy <= 1; ++dy)
@@ -63,13 +65,12 @@ class SampleGrid {
           const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
           if (const int64_t slot = dense_slot(x, y, z); slot >= 0) {
             for (int s = head_[std::size_t(slot)]; s >= 0; s = next_[std::size_t(s)])
-              if (comp[s] == component && norm2(pos[s] - p) < d2) return false;
+              if (close(s)) return false;
             continue;
           }
           auto it = cells_.find(key(x, y, z));
           if (it == cells_.end()) continue;
-          for (int s : it->second)
-            if (comp[s] == component && norm2(pos[s] - p) < d2) return false;
+          if (std::any_of(it->second.begin(), it->second.end(), close)) return false;
         }
     return true;
   }
