@@ -9,18 +9,16 @@
 // Method: dart throwing over area-weighted random surface points, candidate i
 // drawn from hash64(seed, i) (about 40 candidates per expected sample, so the
 // chance that a disk-sized gap gets no candidate is below e^-100), accepted in
-// candidate order against a grid of cells (SampleGrid); then a
-// maximal-coverage pass offers every triangle's centroid and corners in
-// triangle order, which fills what chance left and gives tiny components
-// their sample. Candidates are generated
-// in parallel by index and accepted serially, so the result is the same at any
-// thread count.
+// candidate order against the kept samples (detail::SpacedPoints, grouped by
+// component); then a maximal-coverage pass offers every triangle's centroid
+// and corners in triangle order, which fills what chance left and gives tiny
+// components their sample. Candidates are generated in parallel by index and
+// accepted serially, so the result is the same at any thread count.
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <optional>
-#include <unordered_map>
 
+#include "core/spaced_points.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/patches/patches.hpp"
 
@@ -30,84 +28,6 @@ namespace {
 struct Candidate {
   Vec3 position;
   int triangle = -1;
-};
-
-// Accepted samples bucketed on cells of the minimum distance. Over the mesh's
-// bounding box (two cells of margin) a dense array of per-cell lists: the
-// accept loop is serial and asks 27 cells for each of its ~40 candidates per
-// sample, which a hash map answered at about a fifth of a second per
-// 80k-triangle frame. Cells outside it (a box too large for the array, or a
-// point rounded past the box) go to a hash map; either way `free` answers
-// the same question, so the samples do not depend on which holds a cell.
-class SampleGrid {
- public:
-  SampleGrid(double cell, const Box3& box) : cell_(cell), origin_(box.lo) {
-    if (box.empty()) return;
-    const Vec3 size = box.size();
-    const double n[3] = {size.x / cell, size.y / cell, size.z / cell};
-    double cells = 1;
-    for (int k = 0; k < 3; ++k) {
-      if (!(n[k] >= 0 && n[k] < 1e8)) return;  // NaN, or far too many cells
-      dims_[k] = int64_t(n[k]) + 1 + 2 * kMargin;
-      cells *= double(dims_[k]);
-    }
-    if (cells > double(kMaxDenseCells)) return;
-    head_.assign(std::size_t(cells), -1);
-  }
-  // True when no accepted sample of `component` lies closer than `d` to p.
-  bool free(const Vec3& p, int component, double d2, const std::vector<Vec3>& pos,
-            const std::vector<int>& comp) const {
-    auto close = [&](int s) { return comp[s] == component && norm2(pos[s] - p) < d2; };
-    const auto c = cell_of(p);
-    for (int64_t dz = -1; dz <= 1; ++dz)
-      for (int64_t dy = -1; dy <= 1; ++dy)
-        for (int64_t dx = -1; dx <= 1; ++dx) {
-          const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
-          if (const int64_t slot = dense_slot(x, y, z); slot >= 0) {
-            for (int s = head_[std::size_t(slot)]; s >= 0; s = next_[std::size_t(s)])
-              if (close(s)) return false;
-            continue;
-          }
-          auto it = cells_.find(key(x, y, z));
-          if (it == cells_.end()) continue;
-          if (std::any_of(it->second.begin(), it->second.end(), close)) return false;
-        }
-    return true;
-  }
-  // Samples are numbered 0, 1, 2, ... in insertion order.
-  void insert(const Vec3& p, int sample) {
-    const auto c = cell_of(p);
-    next_.resize(std::max(next_.size(), std::size_t(sample) + 1), -1);
-    if (const int64_t slot = dense_slot(c[0], c[1], c[2]); slot >= 0) {
-      next_[std::size_t(sample)] = head_[std::size_t(slot)];
-      head_[std::size_t(slot)] = sample;
-      return;
-    }
-    cells_[key(c[0], c[1], c[2])].push_back(sample);
-  }
-
- private:
-  static constexpr int64_t kMargin = 2;
-  static constexpr std::size_t kMaxDenseCells = std::size_t(1) << 23;  // 32 MiB of heads
-  std::array<int64_t, 3> cell_of(const Vec3& p) const {
-    return {int64_t(std::floor((p.x - origin_.x) / cell_)), int64_t(std::floor((p.y - origin_.y) / cell_)),
-            int64_t(std::floor((p.z - origin_.z) / cell_))};
-  }
-  // Index into head_ of cell (x, y, z), or -1 when the array does not hold it.
-  int64_t dense_slot(int64_t x, int64_t y, int64_t z) const {
-    if (head_.empty()) return -1;
-    x += kMargin, y += kMargin, z += kMargin;
-    if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return -1;
-    return (z * dims_[1] + y) * dims_[0] + x;
-  }
-  static uint64_t key(int64_t x, int64_t y, int64_t z) {
-    return (uint64_t(x & 0x1fffff) << 42) | (uint64_t(y & 0x1fffff) << 21) | uint64_t(z & 0x1fffff);
-  }
-  double cell_;
-  Vec3 origin_;
-  int64_t dims_[3] = {0, 0, 0};
-  std::vector<int> head_, next_;  // per dense cell its last sample, per sample the one inserted before it
-  std::unordered_map<uint64_t, std::vector<int>> cells_;
 };
 
 }  // namespace
@@ -142,17 +62,11 @@ std::vector<SurfacePoint> seed_points(const TriMesh& mesh, double min_distance, 
     }
   }, 4096);
 
-  SampleGrid grid(min_distance, bounding_box(mesh));
-  const double d2 = min_distance * min_distance;
-  std::vector<Vec3> pos;
-  std::vector<int> comp;
+  detail::SpacedPoints kept(min_distance, bounding_box(mesh));
   auto offer = [&](const Vec3& p, int t) {
-    if (!grid.free(p, component[t], d2, pos, comp)) return;
-    const Vec3 n = normalized(triangle_normal_area2(mesh, t));
-    grid.insert(p, int(pos.size()));
-    pos.push_back(p);
-    comp.push_back(component[t]);
-    out.push_back({p, n, t});
+    if (!kept.free(p, component[t])) return;
+    kept.add(p, component[t]);
+    out.push_back({p, normalized(triangle_normal_area2(mesh, t)), t});
   };
   for (const Candidate& c : cand) offer(c.position, c.triangle);
   for (std::size_t t = 0; t < nt; ++t) {

@@ -14,10 +14,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cmath>
-#include <unordered_map>
 #include <stdexcept>
 #include <unordered_set>
 
+#include "core/spaced_points.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/surface/surface_query.hpp"
 #include "raster/internal.hpp"
@@ -33,39 +33,6 @@ SurfacePoint texel_surface_point(const RasterContext& ctx, std::size_t i) {
   at.triangle = F;
   return at;
 }
-
-// Seeds at least `spacing` apart in 3D (hash grid of cell `spacing`).
-// Holes offer their texels in row order, so the seed that kept the last
-// point out usually keeps the next one out too: it is tried first (the
-// answer is the same, 27 cell lookups fewer).
-struct SeedGrid {
-  double cell;
-  std::unordered_map<uint64_t, std::vector<Vec3>> cells;
-  mutable const Vec3* last_blocker = nullptr;  // into `cells`: reset by add()
-  uint64_t key(int64_t x, int64_t y, int64_t z) const { return hash64(uint64_t(x), uint64_t(y), uint64_t(z)); }
-  bool free(const Vec3& p) const {
-    if (last_blocker && norm2(*last_blocker - p) < cell * cell) return false;
-    const int64_t cx = int64_t(std::floor(p.x / cell)), cy = int64_t(std::floor(p.y / cell)),
-                  cz = int64_t(std::floor(p.z / cell));
-    for (int64_t z = cz - 1; z <= cz + 1; ++z)
-      for (int64_t y = cy - 1; y <= cy + 1; ++y)
-        for (int64_t x = cx - 1; x <= cx + 1; ++x) {
-          auto it = cells.find(key(x, y, z));
-          if (it == cells.end()) continue;
-          for (const Vec3& q : it->second)
-            if (norm2(q - p) < cell * cell) {
-              last_blocker = &q;
-              return false;
-            }
-        }
-    return true;
-  }
-  void add(const Vec3& p) {
-    last_blocker = nullptr;  // the push may move the vector it points into
-    cells[key(int64_t(std::floor(p.x / cell)), int64_t(std::floor(p.y / cell)), int64_t(std::floor(p.z / cell)))]
-        .push_back(p);
-  }
-};
 
 // The chart texels (in texel order) that no patch keeps and `also` accepts,
 // gathered on all threads: a serial scan of 25M keys per round showed at
@@ -231,7 +198,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
 
     // Holes in texel order of their first texel; seeds in hole order.
     std::vector<uint32_t> seeds;
-    SeedGrid grid{spacing, {}};
+    SpacedPoints grid(spacing, bounding_box(ctx.mesh));
     std::vector<uint32_t> members;
     int32_t holes = 0;
     for (uint32_t start : open) {
