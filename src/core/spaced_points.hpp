@@ -18,7 +18,8 @@ namespace lapflow::detail {
 /// rounded past the box) goes to a hash map. Either way `free` answers the
 /// same question, so the kept points do not depend on which holds a cell.
 /// Each point has a group (the seeding's connected component): only points
-/// of the same group keep each other out.
+/// of the same group keep each other out. One thread at a time, `free`
+/// included (it caches its last blocker).
 class SpacedPoints {
  public:
   SpacedPoints(double d, const Box3& box);
