@@ -24,9 +24,10 @@ bool brute_free(const std::vector<Kept>& kept, const Vec3& p, int group, double 
   return true;
 }
 
-// Offers `n` random points of [-1, 2]^3 (half of them outside `box`, which
-// is [0, 1]^3 or empty), two groups, keeping the free ones; every answer is
-// checked against the brute force. Returns how many were kept.
+// Offers `n` runs of random points of [-1, 2]^3 in two groups, keeping the
+// free ones; every answer is checked against the brute force. Returns how
+// many were kept. Against a box of [0, 1]^3 most points fall outside it
+// (the hash map), the rest inside (the array).
 std::size_t offer_and_check(const Box3& box, double d, int n, unsigned seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 2.0);
