@@ -178,6 +178,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
   std::vector<int32_t> label;  // per chart texel: hole id this round, -1 none
   std::vector<uint32_t> open, queue;
   const double spacing = 2 * ctx.radius;
+  const Box3 mesh_box = bounding_box(ctx.mesh);  // every round's seed grid covers it
   for (int round = 0; born < max_patches; ++round) {
     auto still_open = [&](std::size_t i) {
       return (closed_texel.empty() || !closed_texel[i]) && (failed.empty() || !failed.count(tm.triangle[i]));
@@ -198,7 +199,7 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
 
     // Holes in texel order of their first texel; seeds in hole order.
     std::vector<uint32_t> seeds;
-    SpacedPoints grid(spacing, bounding_box(ctx.mesh));
+    SpacedPoints grid(spacing, mesh_box);
     std::vector<uint32_t> members;
     int32_t holes = 0;
     for (uint32_t start : open) {
