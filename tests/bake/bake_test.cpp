@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <system_error>
+#include <vector>
 
 #include "io_test_helpers.hpp"
 #include "lapflow/addons/demo_scene.hpp"
@@ -24,16 +26,43 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// The folders this test process made (fresh_dir). When every test of the
+/// process passed they are removed at its end: a clone tested once and
+/// deleted (as CI does) left about 1.6 GB in the temp dir for good. A
+/// failed test keeps its folders to look into. ctest runs each test in a
+/// process of its own, so no other test's folder is in the list.
+class MadeFolders : public ::testing::Environment {
+ public:
+  void add(const fs::path& d) { made_.push_back(d); }
+  void TearDown() override {
+    if (!::testing::UnitTest::GetInstance()->Passed()) return;
+    for (const fs::path& d : made_) {
+      std::error_code ec;
+      fs::remove_all(d, ec);
+    }
+  }
+
+ private:
+  std::vector<fs::path> made_;
+};
+
+// Registered before main, as gtest asks of a program using gtest_main;
+// gtest owns it.
+MadeFolders* const made_folders =
+    static_cast<MadeFolders*>(::testing::AddGlobalTestEnvironment(new MadeFolders));
+
 /// A folder of its own per test name and per build folder (a hash of its
 /// lapflow binary's path): two test runs on one machine (two worktrees, or
 /// two build folders of one tree) must not bake into, and delete, each
-/// other's folders. A build folder's next run reuses and clears its own, so
-/// runs do not pile up in the temp dir (the every-frame bakes leave 0.45 GB).
+/// other's folders. A build folder's next run reuses and clears its own,
+/// and a passing test removes its folders at the end (MadeFolders), so runs
+/// do not pile up in the temp dir (the every-frame bakes leave 0.45 GB).
 fs::path fresh_dir(const std::string& name) {
   const std::string build = fmt::format("{:08x}", std::hash<std::string>{}(LAPFLOW_BINARY) & 0xffffffffu);
   const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + build + "_" + name);
   fs::remove_all(d);
   fs::create_directories(d);
+  made_folders->add(d);
   return d;
 }
 
