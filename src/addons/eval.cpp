@@ -131,6 +131,7 @@ struct FrameData {
   std::vector<uint8_t> covered;         ///< patch >= 0 or alpha = 1
   std::vector<float> rgb;               ///< per chart texel: linear R, G, B
   double texel_world = 0;               ///< metres per texel: sqrt(surface area / chart uv area in texels)
+  double texel_world_count = 0;         ///< metres per texel: sqrt(surface area / chart texel count)
   std::vector<Vec3> vertex_velocity;    ///< input per-vertex velocity (empty: grid or zero)
   std::unique_ptr<VelocityGrid> grid;
   std::unique_ptr<SurfaceQuery> query;  ///< built when the next frame looks back at this one
@@ -246,6 +247,7 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
     }
   }
   f.texel_world = area_uv > 0 ? std::sqrt(area3 / area_uv) : kNoValue;
+  f.texel_world_count = f.texels.size() ? std::sqrt(area3 / double(f.texels.size())) : kNoValue;
 
   const std::size_t count = f.texels.size();
   f.slot.assign(std::size_t(f.n) * f.n, -1);
@@ -734,6 +736,54 @@ void rest_point_drift(const FrameData& prev, const FrameData& cur, const PairSet
 // (pair_metrics), as a popping map shows it.
 enum class PopKind : uint8_t { NotCompared, Kept, PoppedToExisting, PoppedToNewborn };
 
+/// Rest change at fixed surface points as shared/tools/check_bake.py
+/// `change` measures it (FrameMetrics::rest_change).
+void rest_point_change(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m) {
+  const std::size_t count = cur.texels.size();
+  // The texel as the checker sizes it: the surface's area over the chart
+  // texels (whole texels, a little smaller than texel_world).
+  const double uv_texel = cur.texel_world_count / (2 * s.radius);
+  const double reach = 4 * cur.texel_world_count;
+  const int n = prev.n;
+  struct Part {
+    std::size_t compared = 0, changed = 0;
+  };
+  const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
+    for (std::size_t i = b; i < e; ++i) {
+      if (cur.patch[i] < 0 || !(norm(velocity_at(cur, i, cur.position[i])) <= s.rest_speed)) continue;
+      const ClosestHit hit = prev.query->closest(cur.position[i], reach);
+      if (!hit.found) continue;
+      const std::size_t t = std::size_t(hit.triangle);
+      const Vec2 uv = prev.uv.corner_uv[3 * t] * (1 - hit.b1 - hit.b2) + prev.uv.corner_uv[3 * t + 1] * hit.b1 +
+                      prev.uv.corner_uv[3 * t + 2] * hit.b2;
+      // A point at a texel's very centre (a tie between two 2x2 blocks that
+      // rounding would settle either way) takes the block that starts there.
+      constexpr double kTie = 1e-9;
+      const double x = uv.x * n - 0.5 + kTie, y = (1 - uv.y) * n - 0.5 + kTie;
+      const int x0 = std::clamp(int(std::floor(x)), 0, n - 2), y0 = std::clamp(int(std::floor(y)), 0, n - 2);
+      const double fx = std::clamp(x - x0, 0.0, 1.0), fy = std::clamp(y - y0, 0.0, 1.0);
+      const int32_t j[4] = {prev.slot_at(x0, y0), prev.slot_at(x0 + 1, y0), prev.slot_at(x0, y0 + 1),
+                            prev.slot_at(x0 + 1, y0 + 1)};
+      bool same = true;
+      for (int k = 0; k < 4 && same; ++k) same = j[k] >= 0 && prev.patch[j[k]] >= 0 && prev.patch[j[k]] == prev.patch[j[0]];
+      if (!same) continue;
+      ++p.compared;
+      if (prev.patch[j[0]] != cur.patch[i]) {
+        ++p.changed;
+        continue;
+      }
+      const double w[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+      double u0 = 0, v0 = 0;
+      for (int k = 0; k < 4; ++k) u0 += w[k] * prev.pu[j[k]], v0 += w[k] * prev.pv[j[k]];
+      p.changed += std::hypot(cur.pu[i] - u0, cur.pv[i] - v0) > uv_texel;
+    }
+  });
+  Part total;
+  for (const Part& p : parts) total.compared += p.compared, total.changed += p.changed;
+  m.rest_change_points = total.compared;
+  m.rest_change = total.compared ? double(total.changed) / double(total.compared) : kNoValue;
+}
+
 void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSettings& s, FrameMetrics& m,
                   std::vector<PopKind>* kinds = nullptr) {
   const std::size_t count = cur.texels.size();
@@ -839,6 +889,7 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   m.drift_texel = t.rest ? double(t.drifted) / double(t.rest) : kNoValue;
 
   rest_point_drift(prev, cur, s, m);
+  rest_point_change(prev, cur, s, m);
 }
 
 /// The population of one frame as NAME.stats.jsonl gives it.
@@ -924,6 +975,7 @@ const std::vector<MetricDef>& metric_defs() {
       {"fresh_seeding", [](const FrameMetrics& m) { return m.fresh_seeding ? double(*m.fresh_seeding) : kNoValue; }},
       {"drift", [](const FrameMetrics& m) { return m.drift; }},
       {"drift_texel", [](const FrameMetrics& m) { return m.drift_texel; }},
+      {"rest_change", [](const FrameMetrics& m) { return m.rest_change; }},
       {"distortion_median", [](const FrameMetrics& m) { return m.distortion_median; }},
       {"distortion_p90", [](const FrameMetrics& m) { return m.distortion_p90; }},
       {"distortion_p99", [](const FrameMetrics& m) { return m.distortion_p99; }},
@@ -1067,6 +1119,8 @@ std::string eval_report_json(const EvalReport& r) {
         {"drift_far_points", m.drift_far_points},
         {"rest_texels", m.rest_texels},
         {"drift_texel", number(m.drift_texel)},
+        {"rest_change", number(m.rest_change)},
+        {"rest_change_points", m.rest_change_points},
         {"distortion_texels", m.distortion_texels},
         {"distortion_median", number(m.distortion_median)},
         {"distortion_p90", number(m.distortion_p90)},
@@ -1137,6 +1191,10 @@ std::string eval_report_table(const EvalReport& r) {
   // The population, when the bake's stats hold it.
   const double births = get("popping_births", &MetricSummary::mean), alive = get("alive", &MetricSummary::max),
                fresh = get("fresh_seeding", &MetricSummary::mean);
+  const double change = get("rest_change", &MetricSummary::mean), change_max = get("rest_change", &MetricSummary::max);
+  if (std::isfinite(change))
+    out += fmt::format("\nrest change at fixed points (check_bake.py's definition): {:.2f}% a frame, at most {:.2f}%",
+                       100 * change, 100 * change_max);
   if (std::isfinite(births)) out += fmt::format("\npopping caused by births: {:.1f}% of the popped surface (mean over frames)\n", 100 * births);
   if (std::isfinite(alive) && std::isfinite(fresh)) {
     double ratio = 0;

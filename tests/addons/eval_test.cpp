@@ -384,6 +384,12 @@ TEST(Eval, GridToyDriftAtFixedPointsLeavesBordersOut) {
   EXPECT_NEAR(f2.drift, 13.0 / 24.0, 1e-12);
   // Per texel: all 32 of the right patch, (2,5), and (1,2) (over half a texel).
   EXPECT_NEAR(f2.drift_texel, 34.0 / 64.0, 1e-12);
+  // The checker's rest change: each point's 2x2 texels of frame 1 around it
+  // must hold one patch, which leaves out column 3 (its 2x2 reach column 4):
+  // 56 points. Changed: the 32 of the renamed right patch and (2,5); (1,2)
+  // moved under a texel.
+  EXPECT_EQ(f2.rest_change_points, 56u);
+  EXPECT_NEAR(f2.rest_change, 33.0 / 56.0, 1e-12);
 
   // Frame 3: every point off the borders is 1.5 texels from frame 2's
   // surface: none is compared. Per texel, the back-projected points find the
@@ -394,6 +400,10 @@ TEST(Eval, GridToyDriftAtFixedPointsLeavesBordersOut) {
   EXPECT_EQ(f3.drift_far_points, 24u);
   EXPECT_TRUE(std::isnan(f3.drift));
   EXPECT_EQ(f3.drift_texel, 0.0);
+  // The checker's reach is four texels: the same 56 points are compared, and
+  // frame 3 shows frame 2's texture at each of them.
+  EXPECT_EQ(f3.rest_change_points, 56u);
+  EXPECT_EQ(f3.rest_change, 0.0);
 }
 
 TEST(Eval, ToyFlowErrorIsTheRelativeMismatch) {

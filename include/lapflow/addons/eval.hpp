@@ -83,6 +83,18 @@ struct FrameMetrics {
   // the texels with a patch at rest.
   std::size_t drift_points = 0, drift_border_points = 0, drift_far_points = 0;
   double drift = kNoValue;
+  // Rest change, the definition of the independent checker
+  // (shared/tools/check_bake.py change): every covered texel with |v| <=
+  // min_speed, located on the previous frame's mesh by closest point (within
+  // four texels); its previous patch is the nearest of the 2x2 texels around
+  // that atlas point, which must all hold one patch (else it is left out),
+  // and its previous (u,v) their bilinear blend. Changed: another patch, or
+  // (u,v) moved by more than one texel. Unlike drift, it counts points next
+  // to a patch border on this frame, so a patch that gains or loses texels
+  // at its border counts here and not in drift. rest_change_points: the
+  // points compared.
+  std::size_t rest_change_points = 0;
+  double rest_change = kNoValue;
   // The former per-texel drift, kept for comparison: share of the rest
   // texels whose back-advected point on the previous frame has another
   // patch, or (u,v) off by more than half a texel. It counts patch borders,
