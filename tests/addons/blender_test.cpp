@@ -1,4 +1,4 @@
-// tools/blender_lookdev.py in Debian's Blender: a tiny bake rendered headless
+// tools/blender/blender_lookdev.py in Debian's Blender: a tiny bake rendered headless
 // must show the atlas's colours. Skipped when `blender` is not on PATH (CI).
 #include <gtest/gtest.h>
 
@@ -19,7 +19,7 @@ using test::TempDir;
 bool have_blender(const TempDir& dir) { return test::run_command("command -v blender", nullptr, nullptr, dir) == 0; }
 
 std::string lookdev(const std::string& args) {
-  return "blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_lookdev.py' -- " + args;
+  return "blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender/blender_lookdev.py' -- " + args;
 }
 
 using Rgb = std::array<double, 3>;
@@ -135,7 +135,7 @@ TEST(BlenderPatches, ColoursEachPatchCoreByItsId) {
                               nullptr, &err, dir),
             0)
       << err;
-  ASSERT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_patches.py' -- "
+  ASSERT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender/blender_patches.py' -- "
                               "--patches '" + (dir / "p") + "/demo.patches.%04d.ply' --frames 2 --samples 4 "
                               "--resolution 160x120 --no-ground --out '" + (dir / "r") + "'",
                               nullptr, &err, dir),
@@ -166,7 +166,7 @@ TEST(BlenderPatches, ColoursEachPatchCoreByItsId) {
   EXPECT_GE(hues, 5);
 
   // A missing dump is a clear error.
-  EXPECT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender_patches.py' -- "
+  EXPECT_EQ(test::run_command("blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender/blender_patches.py' -- "
                               "--patches '" + (dir / "p") + "/demo.patches.%04d.ply' --frames 7",
                               nullptr, &err, dir),
             2);

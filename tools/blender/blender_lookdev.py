@@ -1,6 +1,6 @@
 """Render a lapflow bake in Blender (Cycles, headless).
 
-    blender -b -P tools/blender_lookdev.py -- --bake DIR [--frames 1,10,20 | A-B]
+    blender -b -P tools/blender/blender_lookdev.py -- --bake DIR [--frames 1,10,20 | A-B]
         [--out DIR] [--samples N] [--resolution WxH] [--displacement-scale S]
         [--displacement bump|true|none] [--camera auto|x,y,z] [--target x,y,z]
 
@@ -34,7 +34,7 @@ class BadInput(Exception):
 
 def script_args():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    p = argparse.ArgumentParser(prog="blender -b -P tools/blender_lookdev.py --",
+    p = argparse.ArgumentParser(prog="blender -b -P tools/blender/blender_lookdev.py --",
                                 description="Render frames of a lapflow bake with Cycles.")
     p.add_argument("--bake", required=True, help="bake output folder (holds NAME.bake.json)")
     p.add_argument("--name", default="", help="which bake when the folder holds several")

@@ -1,6 +1,6 @@
 """Look at lapflow's patches in Blender: does each patch ride the flow?
 
-    blender -b -P tools/blender_patches.py -- --patches 'DIR/NAME.patches.%04d.ply'
+    blender -b -P tools/blender/blender_patches.py -- --patches 'DIR/NAME.patches.%04d.ply'
         --frames 1,11,21,31 [--fluid 'DATA/NAME.%04d.ply'] [--core 0.2]
         [--out DIR] [--samples N] [--resolution WxH] [--camera auto|x,y,z]
 
@@ -37,7 +37,7 @@ PLY_TYPES = {"char": "b", "int8": "b", "uchar": "B", "uint8": "B", "short": "h",
 
 def script_args():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    p = argparse.ArgumentParser(prog="blender -b -P tools/blender_patches.py --",
+    p = argparse.ArgumentParser(prog="blender -b -P tools/blender/blender_patches.py --",
                                 description="Render lapflow patch dumps coloured by patch id.")
     p.add_argument("--patches", required=True, help="patch dump pattern with %%04d, e.g. out/dam_break.patches.%%04d.ply")
     p.add_argument("--frames", required=True, help="frames: 1,11,21 or A-B")

@@ -4,7 +4,7 @@ each bake step's seconds per frame against what it should scale with, over
 every frame but the first of the NAME.stats.jsonl files given (several
 scenes and resolutions together). Standard library only.
 
-    python3 tools/cost_model.py A/NAME.stats.jsonl B/NAME.stats.jsonl ...
+    python3 tools/bench/cost_model.py A/NAME.stats.jsonl B/NAME.stats.jsonl ...
 """
 import json
 import statistics

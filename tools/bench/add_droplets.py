@@ -3,7 +3,7 @@
 for frames with over a thousand atlas charts (a spray of droplets), which the
 shared scenes do not have (docs/atlas.md, "Numbers").
 
-    python3 tools/add_droplets.py ../shared/data/splash/splash.0030.ply 150 out.ply
+    python3 tools/bench/add_droplets.py ../shared/data/splash/splash.0030.ply 150 out.ply
 
 Droplets: radius 4-20 mm, subdivided once (two of three) or twice, centred
 in x in [-0.8, 0.8], y in [-0.6, 0.6], z in [0.3, 1.0] m, from a fixed seed.
