@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -318,7 +317,6 @@ TEST(BadInput, AnElementWithNoPropertiesAndAHugeCountReadsAtOnce) {
                     "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                     "property float z\nelement junk 213333333333333\nelement face 1\n"
                     "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-  const auto start = std::chrono::steady_clock::now();
+  // A walk would not end within the test's ctest TIMEOUT (CMakeLists.txt).
   EXPECT_EQ(read_mesh(tmp / "empty.ply").triangle_count(), 1u);
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }
