@@ -136,11 +136,23 @@ inline int run_command(const std::string& cmd, std::string* out, std::string* er
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+/// Whether a test whose ../shared/data input is absent fails instead of
+/// skipping: LAPFLOW_REQUIRE_SHARED_DATA set and not "0". scripts/test.sh
+/// sets it when ../shared/data is there, so a folder with a scene missing
+/// cannot shrink the suite unseen.
+inline bool shared_data_required() {
+  const char* v = std::getenv("LAPFLOW_REQUIRE_SHARED_DATA");
+  return v && *v && std::string(v) != "0";
+}
+
 /// The shared Mantaflow data folder, or "" when it is absent.
 inline std::string shared_data_dir() {
   const std::string dir = LAPFLOW_SOURCE_DIR "/../shared/data";
   return std::filesystem::is_directory(dir + "/dam_break") ? dir : std::string();
 }
+
+/// ../shared/data/dam_break, whether it is there or not.
+inline std::string shared_data_path() { return LAPFLOW_SOURCE_DIR "/../shared/data/dam_break"; }
 
 /// ../shared/data/dam_break/dam_break.NNNN.ply (it may be absent).
 inline std::string dam_break_frame(int frame) {
@@ -194,3 +206,16 @@ inline int exr_header_compression(const std::string& path) {
 }
 
 }  // namespace lapflow::test
+
+/// Skips the calling test when `path`, an input under ../shared/data, is
+/// absent, or fails it when test::shared_data_required().
+#define LAPFLOW_NEED_SHARED(path)                                                                        \
+  do {                                                                                                   \
+    const std::string lapflow_need_ = (path);                                                            \
+    if (!std::filesystem::exists(lapflow_need_)) {                                                       \
+      if (::lapflow::test::shared_data_required())                                                       \
+        FAIL() << lapflow_need_ << " is absent (LAPFLOW_REQUIRE_SHARED_DATA is set)";                  \
+      else                                                                                               \
+        GTEST_SKIP() << lapflow_need_ << " is absent: test skipped";                                   \
+    }                                                                                                    \
+  } while (0)

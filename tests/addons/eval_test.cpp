@@ -562,8 +562,7 @@ TEST(Eval, ViscousDropAtRestMeetsTheRestTargets) {
   // a resting patch's far edge reached over the newly uncovered strip.
   const std::filesystem::path data =
       std::filesystem::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
-  if (!std::filesystem::exists(data / "viscous_drop.0072.ply"))
-    GTEST_SKIP() << "../shared/data/viscous_drop is not present";
+  LAPFLOW_NEED_SHARED((data / "viscous_drop.0072.ply").string());
   TempDir out("eval_viscous_rest");
   BakeOptions o = test::small_pebbles_bake(data.string(), out.str());
   o.mesh_pattern = (data / "viscous_drop.%04d.ply").string();

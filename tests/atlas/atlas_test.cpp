@@ -606,7 +606,7 @@ TEST(SurfaceAtlas, EmptyMeshGivesAnEmptyAtlas) {
 using test::dam_break_frame;
 
 TEST(SurfaceAtlas, DamBreakFramesHoldTheBounds) {
-  if (!std::filesystem::exists(dam_break_frame(1))) GTEST_SKIP() << "../shared/data/dam_break is absent";
+  LAPFLOW_NEED_SHARED(dam_break_frame(1));
   for (int frame : {1, 30, 60, 100}) {
     SCOPED_TRACE("frame " + std::to_string(frame));
     const TriMesh m = read_mesh(dam_break_frame(frame));
@@ -631,7 +631,7 @@ TEST(SurfaceAtlas, SharedFramesReachTheUtilizationFloorAt4096) {
   const std::pair<const char*, int> frames[] = {{"dam_break", 65}, {"dam_break", 75}, {"dam_break", 28},
                                                 {"splash", 11}, {"splash", 12}};
   for (const auto& [scene, frame] : frames)
-    if (!std::filesystem::exists(shared_frame(scene, frame))) GTEST_SKIP() << "../shared/data/" << scene << " is absent";
+    LAPFLOW_NEED_SHARED(shared_frame(scene, frame));
   for (const auto& [scene, frame] : frames) {
     SCOPED_TRACE(shared_frame(scene, frame));
     const TriMesh m = read_mesh(shared_frame(scene, frame));
@@ -647,7 +647,7 @@ TEST(SurfaceAtlas, SharedFramesReachTheUtilizationFloorAt4096) {
 }
 
 TEST(SurfaceAtlas, SharedFrameIsTheSameAtlasForOneAndTwoThreads) {
-  if (!std::filesystem::exists(shared_frame("splash", 30))) GTEST_SKIP() << "../shared/data/splash is absent";
+  LAPFLOW_NEED_SHARED(shared_frame("splash", 30));
   const TriMesh m = read_mesh(shared_frame("splash", 30));
   const AtlasOptions o = options(2048);
   set_thread_count(1);
@@ -661,7 +661,7 @@ TEST(SurfaceAtlas, SharedFrameIsTheSameAtlasForOneAndTwoThreads) {
 }
 
 TEST(SurfaceAtlas, SharedFrameBuiltTogetherIsTheAtlasBuiltAlone) {
-  if (!std::filesystem::exists(shared_frame("splash", 12))) GTEST_SKIP() << "../shared/data/splash is absent";
+  LAPFLOW_NEED_SHARED(shared_frame("splash", 12));
   expect_built_together_as_alone(read_mesh(shared_frame("splash", 12)));
 }
 

@@ -307,7 +307,7 @@ namespace {
 /// coverage of every frame.
 void expect_full_coverage_on_every_frame(const std::string& scene, double radius) {
   const fs::path data = fs::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / scene;
-  if (!fs::exists(data / (scene + ".0001.ply"))) GTEST_SKIP() << "../shared/data/" << scene << " is not present";
+  LAPFLOW_NEED_SHARED((data / (scene + ".0001.ply")).string());
   const fs::path out = fresh_dir("every_frame_" + scene);
   BakeOptions o = small_bake(data, out);
   o.mesh_pattern = (data / (scene + ".%04d.ply")).string();
@@ -350,7 +350,7 @@ TEST(BakeSharedData, ViscousDropSpreadingAtRestBreedsNoPatches) {
   // --rest-hole lets the patches at rest that hold its rim continue it: no
   // birth, the same patches alive, every texel covered.
   const fs::path data = fs::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
-  if (!fs::exists(data / "viscous_drop.0060.ply")) GTEST_SKIP() << "../shared/data/viscous_drop is not present";
+  LAPFLOW_NEED_SHARED((data / "viscous_drop.0060.ply").string());
   BakeOptions o = small_bake(data, fresh_dir("rest_hole_default"));
   o.mesh_pattern = (data / "viscous_drop.%04d.ply").string();
   o.frames = FrameRange{60, 70};

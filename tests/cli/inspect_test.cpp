@@ -103,8 +103,8 @@ TEST(InspectCommand, HelpReadsLikeAManPage) {
 }
 
 TEST(InspectCommand, DamBreakWithVdbVelocities) {
+  LAPFLOW_NEED_SHARED(test::shared_data_path());
   const std::string dir = test::shared_data_dir();
-  if (dir.empty()) GTEST_SKIP() << "../shared/data is absent: inspect on dam_break skipped";
   TempDir tmp("inspect");
   std::string out, err;
   ASSERT_EQ(test::run_command(inspect("'" + dir + "/dam_break/dam_break.%04d.ply' --frames 1-3 --json --quiet "

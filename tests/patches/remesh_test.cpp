@@ -213,7 +213,7 @@ TEST(PatchesRemesh, RejectsNonManifoldInput) {
 using test::dam_break_frame;
 
 TEST(PatchesRemesh, DamBreakCutsMatchCgalQuality) {
-  if (!std::filesystem::exists(dam_break_frame(9))) GTEST_SKIP() << "../shared/data/dam_break is absent";
+  LAPFLOW_NEED_SHARED(dam_break_frame(9));
   const TriMesh fluid = read_mesh(dam_break_frame(9));
   const SurfaceQuery surface(fluid);
   const SurfaceAdjacency adj = build_surface_adjacency(fluid);

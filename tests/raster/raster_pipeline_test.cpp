@@ -10,6 +10,7 @@
 #include <map>
 #include <set>
 
+#include "io_test_helpers.hpp"
 #include "lapflow/atlas/atlas.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/core/parallel.hpp"
@@ -166,7 +167,7 @@ namespace {
 // which must stay rare.
 TEST(RasterPipeline, DamBreakFrameFullCoverage) {
   const std::string path = LAPFLOW_SOURCE_DIR "/../shared/data/dam_break/dam_break.0040.ply";
-  if (!std::ifstream(path)) GTEST_SKIP() << "shared data not found: " << path;
+  LAPFLOW_NEED_SHARED(path);
   const TriMesh mesh = read_mesh(path);
   AtlasOptions ao;
   ao.resolution = 512;
