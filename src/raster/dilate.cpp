@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/raster/raster.hpp"
 #include "raster/internal.hpp"
 
 namespace lapflow::detail {
@@ -147,3 +148,47 @@ void dilate_sources(std::vector<int32_t>& source, int N, int gutter) {
 }
 
 }  // namespace lapflow::detail
+
+namespace lapflow {
+
+using namespace detail;
+
+void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
+  RasterContext& ctx = *r.context;
+  const RasterOptions& options = ctx.options;
+  const TexelMap& tm = ctx.atlas.texels;
+  const int N = ctx.N;
+  // Every pixel outside the charts copies its nearest chart pixel's colour
+  // (alpha stays 0), displacement and AOV.
+  if (options.dilate && tm.size() > 0) {
+    std::vector<int32_t>& source = ctx.index;  // reused: the raster steps are done with it
+    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) source[i] = source[i] >= 0 ? int32_t(i) : -1;
+    }, 1 << 16);
+    dilate_sources(source, N, options.gutter);
+    // Colour (RGB) and height from pixel s to pixel i, in half or in float.
+    auto copy_images = [](auto& color, auto& height, std::size_t i, std::size_t s) {
+      if (color.empty()) return;
+      for (int k = 0; k < 3; ++k) color[i * 4 + k] = color[s * 4 + k];
+      height[i] = height[s];
+    };
+    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        const int32_t s = source[i];
+        if (s < 0 || std::size_t(s) == i) continue;
+        copy_images(out.color_half.bits, out.displacement_half.bits, i, std::size_t(s));
+        copy_images(out.color.pixels, out.displacement.pixels, i, std::size_t(s));
+        if (options.aov)
+          for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
+      }
+    }, 1 << 14);
+  } else if (options.aov) {
+    // Outside charts the AOV says "no patch".
+    for (std::size_t i = 0; i < ctx.index.size(); ++i)
+      if (ctx.index[i] < 0) out.aov.pixels[i * 4] = -1.f;
+  }
+  // Dilation reuses the pixel index: the buffers are spent.
+  r.context.reset();
+}
+
+}  // namespace lapflow

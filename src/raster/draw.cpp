@@ -2,9 +2,10 @@
 // every patch triangle is drawn in atlas space and each chart texel keeps the
 // smallest key (patch index << 32 | triangle) whose erosion test passes, by an
 // atomic min, so the winner is the oldest non-eroded patch whatever the
-// drawing order or thread count. A resolve pass then samples the exemplar for
-// each texel's winner (resolve_texels); retirement and gutter dilation are
-// here too; hole filling (fill_holes) is in holes.cpp.
+// drawing order or thread count; retirement (retire_patches) is here too.
+// The resolve pass is in resolve.cpp, hole filling (fill_holes) in holes.cpp,
+// gutter dilation in dilate.cpp, the passes in order (raster_frame) in
+// frame.cpp.
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -45,10 +46,6 @@ int vertex_triangle(const RasterContext& ctx, const Patch& patch, int v) {
   if (s >= int(ctx.mesh.triangles.size())) s = -1;
   if (s < 0 && ctx.locate && *ctx.locate) s = (*ctx.locate)(patch.positions[v]);
   return s;
-}
-
-inline float vertex_weight(const Patch& patch, int v) {
-  return patch.weight.size() == patch.positions.size() ? patch.weight[v] : 1.f;
 }
 
 // The cells where the patch of index p may win a texel when it is bound
@@ -105,8 +102,6 @@ uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3]
   return sure;
 }
 
-namespace {
-
 // Chart texel i at pixel (x, y) has its 3x3 neighbourhood in its own chart.
 // Only such texels mark held cells (resolve_texels), so the cells of a won
 // region stop about a texel short of its chart's border.
@@ -122,6 +117,8 @@ bool interior_texel(const RasterContext& ctx, std::size_t i, int x, int y) {
     }
   return true;
 }
+
+namespace {
 
 // The erosion test of texel idx at pixel (x, y), with the hold where the
 // patch won texels before (RasterOptions::hold), and for a bound patch,
@@ -188,45 +185,18 @@ void bind_rest_ground(RasterContext& ctx, const PatchSet& patches) {
   ctx.rest_ground_slot = std::move(slot);
 }
 
-// The length of the gradient in uv of w interpolated over a patch triangle.
-inline double weight_slope(const Vec2 uv[3], const float w[3]) {
-  const Vec2 d1 = uv[1] - uv[0], d2 = uv[2] - uv[0];
-  const double det = cross(d1, d2);
-  if (!(std::abs(det) > 1e-14)) return 0;
-  const double dw1 = double(w[1]) - w[0], dw2 = double(w[2]) - w[0];
-  const double gx = (dw1 * d2.y - dw2 * d1.y) / det, gy = (dw2 * d1.x - dw1 * d2.x) / det;
-  return std::sqrt(gx * gx + gy * gy);
-}
+}  // namespace
 
 // The draw's test with the hold at (u, v, w) of patch triangle t, as if
 // (u, v) were held (passes).
-inline bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w) {
+bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w) {
   const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
   const float wv[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
   const double r = ctx.held_reach;
   return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + weight_slope(uv, wv) * r));
 }
 
-// Barycentric coordinates of pixel centre (x, y) in pixel-space triangle P.
-struct Bary {
-  Vec2 p0, e1, e2;
-  double inv_area = 0;
-  bool init(const Vec2 P[3]) {
-    p0 = P[0];
-    e1 = P[1] - P[0];
-    e2 = P[2] - P[0];
-    const double a = cross(e1, e2);
-    if (!(std::abs(a) > 1e-12)) return false;
-    inv_area = 1.0 / a;
-    return true;
-  }
-  void at(double x, double y, double& l0, double& l1, double& l2) const {
-    const Vec2 d{x - p0.x, y - p0.y};
-    l1 = cross(d, e2) * inv_area;
-    l2 = cross(e1, d) * inv_area;
-    l0 = 1.0 - l1 - l2;
-  }
-};
+namespace {
 
 // Tolerance on barycentrics so that texel centres on a shared edge are never
 // lost to round-off (a duplicate is harmless: the atomic min picks one).
@@ -1058,229 +1028,6 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   }
 }
 
-FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
-  RasterContext& ctx = *r.context;
-  RasterStats& st = r.stats;
-  const RasterOptions& options = ctx.options;
-  const RasterExemplar& exemplar = *ctx.exemplar;
-  const SurfaceAtlas& atlas = ctx.atlas;
-  const TexelMap& tm = atlas.texels;
-  const int N = ctx.N;
-  const bool blend = options.mode == RasterMode::Blend;
-  FrameTextures out;
-  // The winner's (u, v, w) at the texel centre, then E and H.
-  // The three images are allocated (zero-filled, page by page) on both
-  // cores at once.
-  const bool half = options.images && options.half_images;
-  auto half_image = [&](int channels) {
-    HalfImage h;
-    h.width = N, h.height = N, h.channels = channels;
-    h.bits.assign(std::size_t(N) * N * std::size_t(channels), 0);  // 0: +0 in half
-    return h;
-  };
-  parallel_for(3, [&](std::size_t b, std::size_t e) {
-    for (std::size_t k = b; k < e; ++k) {
-      if (k == 0 && half) out.color_half = half_image(4);
-      if (k == 0 && options.images && !half) out.color = Image(N, N, 4);
-      if (k == 1 && half) out.displacement_half = half_image(1);
-      if (k == 1 && options.images && !half) out.displacement = Image(N, N, 1);
-      if (k == 2 && options.aov) out.aov = Image(N, N, 4);
-    }
-  }, 1);
-  float fallback[4];  // a texel no patch could reach (a chart hole filling failed on): the exemplar's mean
-  sample(exemplar.mips, 0.5, 0.5, 1e9, fallback);
-  std::vector<std::atomic<uint64_t>> won(patches.patches.size());
-  for (auto& a : won) a.store(0, std::memory_order_relaxed);
-  // A winner's pixel-space triangle, for texels of one chart (same_chart)
-  // or of one fluid triangle. Texels come in row order, so a patch triangle
-  // returns on the next rows: a direct-mapped cache per thread, large enough
-  // for a row's worth of triangles, saves most of the recomputation
-  // (winner_pixels is a pure function of these, so hits cannot change a
-  // result). The generation number empties it for each call.
-  struct Winner {
-    uint64_t key = kNoKey;
-    int tri = -1, chart = -1;
-    bool ok = false, same_chart = false;
-    Bary bary;
-    Vec2 ux, uy;  // the patch's uv per pixel step in x and y (Patch::held)
-  };
-  // Patch::held for the next frame (below, per won texel). Bits are or-ed:
-  // the result does not depend on the order.
-  const bool hold = ctx.hold && options.mark_held;
-  if (hold) ctx.held_next.assign(patches.patches.size() * kHeldWords, 0);
-  else ctx.held_next.clear();
-  // A texel won by the test marks the cells that lie wholly inside its
-  // footprint (the texel square mapped into uv by the winner's affine map:
-  // pixel steps ux, uy), and the cell under its centre. No other texel's
-  // centre lies in its footprint, so on an unchanged sampling no texel that
-  // lost finds its cell held (for cells smaller than a texel), and the frame
-  // repeats; under a new sampling the footprints tile the won region but for
-  // a band one cell wide along their borders, which the union over frames
-  // fills.
-  auto mark_held = [&](std::size_t p, double u, double v, Vec2 ux, Vec2 uy) {
-    constexpr int R = kHeldCells;
-    uint64_t* words = &ctx.held_next[p * kHeldWords];
-    auto set = [&](int cu, int cv) {
-      const std::size_t bit = std::size_t(cv) * R + std::size_t(cu);
-      std::atomic_ref<uint64_t> slot(words[bit >> 6]);
-      const uint64_t mask = uint64_t(1) << (bit & 63);
-      if (!(slot.load(std::memory_order_relaxed) & mask)) slot.fetch_or(mask, std::memory_order_relaxed);
-    };
-    set(std::clamp(int(u * R), 0, R - 1), std::clamp(int(v * R), 0, R - 1));
-    const double det = ux.x * uy.y - uy.x * ux.y;
-    if (!(std::abs(det) > 1e-18)) return;
-    // A cell fits in the footprint only if both its widths (area over the
-    // other side's length) reach a cell: at fine atlas resolutions, never.
-    if (std::abs(det) < std::max(norm(ux), norm(uy)) / R) return;
-    const double hx = 0.5 * (std::abs(ux.x) + std::abs(uy.x)), hy = 0.5 * (std::abs(ux.y) + std::abs(uy.y));
-    const int u0 = std::max(0, int(std::floor((u - hx) * R))), u1 = std::min(R - 1, int(std::floor((u + hx) * R)));
-    const int v0 = std::max(0, int(std::floor((v - hy) * R))), v1 = std::min(R - 1, int(std::floor((v + hy) * R)));
-    if (u0 > u1 || v0 > v1 || u1 - u0 > 16 || v1 - v0 > 16) return;  // off the square, or a degenerate map
-    auto inside = [&](double cu, double cv) {  // uv point (cu, cv) in the footprint
-      const double dx = cu - u, dy = cv - v;
-      return std::abs(dx * uy.y - uy.x * dy) <= 0.5 * std::abs(det) && std::abs(ux.x * dy - dx * ux.y) <= 0.5 * std::abs(det);
-    };
-    // Only cells within the footprint's bounding box can lie in it (a
-    // billionth of a cell of slack against round-off): most of [u0, u1] x
-    // [v0, v1] is not, and each of those cells cost four tests.
-    const int iu0 = std::max(u0, int(std::ceil((u - hx) * R - 1e-9))), iu1 = std::min(u1, int(std::floor((u + hx) * R + 1e-9)) - 1);
-    const int iv0 = std::max(v0, int(std::ceil((v - hy) * R - 1e-9))), iv1 = std::min(v1, int(std::floor((v + hy) * R + 1e-9)) - 1);
-    for (int cv = iv0; cv <= iv1; ++cv)
-      for (int cu = iu0; cu <= iu1; ++cu)
-        if (inside(double(cu) / R, double(cv) / R) && inside(double(cu + 1) / R, double(cv) / R) &&
-            inside(double(cu) / R, double(cv + 1) / R) && inside(double(cu + 1) / R, double(cv + 1) / R))
-          set(cu, cv);
-  };
-  constexpr int kWinnerCacheBits = 11;
-  static std::atomic<uint64_t> generations{0};
-  const uint64_t generation = ++generations;
-  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
-    thread_local std::vector<Winner> cache;
-    thread_local uint64_t cache_generation = 0;
-    if (cache_generation != generation) {
-      cache.assign(std::size_t(1) << kWinnerCacheBits, Winner{});
-      cache_generation = generation;
-    }
-    const Winner* cur = nullptr;
-    Vec2 P[3];
-    std::size_t run_patch = 0;  // texels won, counted in runs: one atomic add per run
-    uint64_t run = 0;
-    // half_images: a block of texels' RGBA and H as floats, converted to
-    // half together (to_half's vector instructions) and then stored.
-    constexpr std::size_t kStage = 512;
-    float stage[kStage * 5];
-    uint16_t staged_bits[kStage * 5];
-    std::size_t staged = 0, stage_from = b;
-    auto flush = [&](std::size_t end) {
-      to_half(stage, staged_bits, staged * 5);
-      for (std::size_t k = 0; k < staged; ++k) {
-        const std::size_t pix = tm.texel[stage_from + k];
-        std::copy_n(&staged_bits[k * 5], 4, &out.color_half.bits[pix * 4]);
-        out.displacement_half.bits[pix] = staged_bits[k * 5 + 4];
-      }
-      staged = 0, stage_from = end;
-    };
-    for (std::size_t i = b; i < e; ++i) {
-      const uint32_t pix = tm.texel[i];
-      const int x = int(pix % uint32_t(N)), y = int(pix / uint32_t(N));
-      const uint64_t key = ctx.keys[i];
-      float s[4] = {fallback[0], fallback[1], fallback[2], fallback[3]};
-      float aov[4] = {-1.f, 0.f, 0.f, 0.f};
-      const bool blended = blend && ctx.blend.covered(i);  // else a forced texel: its key's patch extrapolated
-      if (key != kNoKey) {
-        const std::size_t p = std::size_t(key >> 32);
-        const int ti = int(key & 0xffffffffu);
-        const Patch& patch = patches.patches[p];
-        // Same-chart winners do not depend on the texel's triangle: reuse.
-        const int tri = tm.triangle[i];
-        auto matches = [&](const Winner& w) {
-          return w.key == key && (w.same_chart ? atlas.chart_of_triangle[tri] == w.chart : w.tri == tri);
-        };
-        if (!cur || !matches(*cur)) {
-          Winner& slot = cache[(key * 0x9E3779B97F4A7C15ull) >> (64 - kWinnerCacheBits)];
-          if (!matches(slot)) {
-            slot.key = key;
-            slot.tri = tri;
-            slot.chart = atlas.chart_of_triangle[tri];
-            slot.ok = winner_pixels(ctx, patch, ti, tri, P, &slot.same_chart) && slot.bary.init(P);
-            if (slot.ok && hold) {
-              // The map is affine: uv changes by ux per pixel in x, uy in y.
-              const Tri& t = patch.triangles[ti];
-              const Vec2 d1 = patch.rest_uv[t[1]] - patch.rest_uv[t[0]], d2 = patch.rest_uv[t[2]] - patch.rest_uv[t[0]];
-              const double ia = slot.bary.inv_area;
-              slot.ux = (d1 * slot.bary.e2.y - d2 * slot.bary.e1.y) * ia;
-              slot.uy = (d2 * slot.bary.e1.x - d1 * slot.bary.e2.x) * ia;
-            }
-          }
-          cur = &slot;
-        }
-        if (cur->ok) {
-          double l0, l1, l2;
-          cur->bary.at(x, y, l0, l1, l2);
-          const Tri& t = patch.triangles[ti];
-          const double u = l0 * patch.rest_uv[t[0]].x + l1 * patch.rest_uv[t[1]].x + l2 * patch.rest_uv[t[2]].x;
-          const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
-          const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
-                           l2 * vertex_weight(patch, t[2]);
-          if (!blended && options.images) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
-          // Only a texel whose 3x3 neighbourhood lies in its chart marks
-          // (mark_held): near a seam the texels of two charts sample the same
-          // surface at arbitrary offsets, and a cell marked from one chart
-          // would let the patch take a texel of the other that it just lost.
-          // A texel of a small hole closed by a patch at rest marks too: the
-          // next frame gives the region back to it (close_held_texels)
-          // instead of closing it anew from whichever neighbour comes first.
-          // Not where the draw's held test (passes) would then keep it: that
-          // would turn a closed texel into a won one on the next frame, a
-          // change of a surface at rest.
-          if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i] ||
-                       (patch.at_rest && !ctx.closed.empty() && ctx.closed[i] &&
-                        !held_test_keeps(ctx, patch, t, u, v, w))) &&
-              interior_texel(ctx, i, x, y))
-            mark_held(p, u, v, cur->ux, cur->uy);
-          aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
-        }
-        if (p != run_patch) {
-          if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
-          run_patch = p, run = 0;
-        }
-        ++run;
-      }
-      if (options.images) {
-        if (blended) {
-          const int64_t* sum = &ctx.blend.sums[i * 5];
-          for (int c = 0; c < 4; ++c) s[c] = float(double(sum[1 + c]) / double(sum[0]));
-        }
-        float* c = half ? &stage[staged * 5] : &out.color.pixels[std::size_t(pix) * 4];
-        c[0] = s[0], c[1] = s[1], c[2] = s[2], c[3] = key != kNoKey ? 1.f : 0.f;
-        if (half) {
-          c[4] = s[3];
-          if (++staged == kStage) flush(i + 1);
-        } else {
-          out.displacement.pixels[pix] = s[3];
-        }
-      }
-      if (options.aov)
-        for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
-    }
-    if (half) flush(e);
-    if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
-  }, 1 << 12);
-  {
-    constexpr std::size_t kChunk = std::size_t(1) << 16;
-    std::vector<std::size_t> covered((ctx.keys.size() + kChunk - 1) / kChunk, 0);
-    parallel_for(covered.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t c = b; c < e; ++c)
-        for (std::size_t i = c * kChunk; i < std::min(ctx.keys.size(), (c + 1) * kChunk); ++i)
-          covered[c] += ctx.keys[i] != kNoKey;
-    }, 1);
-    st.covered_texels = 0;
-    for (std::size_t c : covered) st.covered_texels += c;
-  }
-  r.texels_won.resize(won.size());
-  for (std::size_t p = 0; p < won.size(); ++p) r.texels_won[p] = won[p].load(std::memory_order_relaxed);
-  return out;
-}
 
 namespace {
 
@@ -1412,65 +1159,6 @@ void retire_patches(RasterBuffers& r, PatchSet& patches) {
   }
   patches.patches = std::move(kept);
   r.texels_won = st.texels_per_patch;
-}
-
-void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
-  RasterContext& ctx = *r.context;
-  const RasterOptions& options = ctx.options;
-  const TexelMap& tm = ctx.atlas.texels;
-  const int N = ctx.N;
-  // Every pixel outside the charts copies its nearest chart pixel's colour
-  // (alpha stays 0), displacement and AOV.
-  if (options.dilate && tm.size() > 0) {
-    std::vector<int32_t>& source = ctx.index;  // reused: the raster steps are done with it
-    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i) source[i] = source[i] >= 0 ? int32_t(i) : -1;
-    }, 1 << 16);
-    dilate_sources(source, N, options.gutter);
-    // Colour (RGB) and height from pixel s to pixel i, in half or in float.
-    auto copy_images = [](auto& color, auto& height, std::size_t i, std::size_t s) {
-      if (color.empty()) return;
-      for (int k = 0; k < 3; ++k) color[i * 4 + k] = color[s * 4 + k];
-      height[i] = height[s];
-    };
-    parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i) {
-        const int32_t s = source[i];
-        if (s < 0 || std::size_t(s) == i) continue;
-        copy_images(out.color_half.bits, out.displacement_half.bits, i, std::size_t(s));
-        copy_images(out.color.pixels, out.displacement.pixels, i, std::size_t(s));
-        if (options.aov)
-          for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
-      }
-    }, 1 << 14);
-  } else if (options.aov) {
-    // Outside charts the AOV says "no patch".
-    for (std::size_t i = 0; i < ctx.index.size(); ++i)
-      if (ctx.index[i] < 0) out.aov.pixels[i * 4] = -1.f;
-  }
-  // Dilation reuses the pixel index: the buffers are spent.
-  r.context.reset();
-}
-
-FrameTextures raster_frame(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                           const RasterOptions& options, const WeightOptions& weights, int frame,
-                           const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches) {
-  Stopwatch clock;
-  RasterBuffers r = begin_raster(mesh, atlas, exemplar, options, weights, locate);
-  RasterStats& st = r.stats;
-  st.seconds_setup = clock.lap();
-  draw_patches(r, patches);
-  st.seconds_raster = clock.lap();
-  fill_holes(r, patches, frame, make_patch);
-  st.seconds_holes = clock.lap();
-  FrameTextures out = resolve_texels(r, patches);
-  st.seconds_resolve = clock.lap();
-  retire_patches(r, patches);
-  dilate_gutter(r, out);
-  st.seconds_dilate = clock.lap();
-  st.seconds_total = clock.total();
-  out.stats = std::move(r.stats);
-  return out;
 }
 
 }  // namespace lapflow

@@ -3,7 +3,9 @@
 // through the steps of raster.hpp (draw.cpp: set-up, draw, resolve, retire,
 // dilate; holes.cpp: hole filling; blend.cpp: Blend mode; dilate.cpp: the
 // gutter's source map).
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -229,5 +231,48 @@ std::size_t cover_from_nearest_patch(RasterContext& ctx, const PatchSet& patches
 /// `source` holds, per pixel, its own index on chart texels and -1 elsewhere;
 /// on return it names a chart pixel for every pixel (when any exists).
 void dilate_sources(std::vector<int32_t>& source, int N, int gutter);
+
+/// Patch vertex v's weight (1 when the patch has none).
+inline float vertex_weight(const Patch& patch, int v) {
+  return patch.weight.size() == patch.positions.size() ? patch.weight[v] : 1.f;
+}
+
+/// The length of the gradient in uv of w interpolated over a patch triangle.
+inline double weight_slope(const Vec2 uv[3], const float w[3]) {
+  const Vec2 d1 = uv[1] - uv[0], d2 = uv[2] - uv[0];
+  const double det = cross(d1, d2);
+  if (!(std::abs(det) > 1e-14)) return 0;
+  const double dw1 = double(w[1]) - w[0], dw2 = double(w[2]) - w[0];
+  const double gx = (dw1 * d2.y - dw2 * d1.y) / det, gy = (dw2 * d1.x - dw1 * d2.x) / det;
+  return std::sqrt(gx * gx + gy * gy);
+}
+
+/// Barycentric coordinates of pixel centre (x, y) in pixel-space triangle P.
+struct Bary {
+  Vec2 p0, e1, e2;
+  double inv_area = 0;
+  bool init(const Vec2 P[3]) {
+    p0 = P[0];
+    e1 = P[1] - P[0];
+    e2 = P[2] - P[0];
+    const double a = cross(e1, e2);
+    if (!(std::abs(a) > 1e-12)) return false;
+    inv_area = 1.0 / a;
+    return true;
+  }
+  void at(double x, double y, double& l0, double& l1, double& l2) const {
+    const Vec2 d{x - p0.x, y - p0.y};
+    l1 = cross(d, e2) * inv_area;
+    l2 = cross(e1, d) * inv_area;
+    l0 = 1.0 - l1 - l2;
+  }
+};
+
+/// Chart texel i at pixel (x, y) has its 3x3 neighbourhood in its own chart.
+/// Only such texels mark held cells (resolve_texels).
+bool interior_texel(const RasterContext& ctx, std::size_t i, int x, int y);
+/// The draw's test with the hold at (u, v, w) of patch triangle t, as if
+/// (u, v) were held.
+bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w);
 
 }  // namespace lapflow::detail
