@@ -2,8 +2,8 @@
 # The README's test command: configure, build (Release) and run every test.
 # LAPFLOW_WERROR=ON (as CI sets it) turns compiler warnings into errors.
 # With ../shared/data beside the project, a test whose shared scene is
-# missing fails (LAPFLOW_REQUIRE_SHARED_DATA); without it those tests skip,
-# and this says how many.
+# missing fails (LAPFLOW_REQUIRE_SHARED_DATA, which CI sets); without it
+# those tests skip. The last line counts the skipped tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DLAPFLOW_WERROR="${LAPFLOW_WERROR:-OFF}"
@@ -13,4 +13,9 @@ if [ -d ../shared/data ]; then
 else
   echo "test: ../shared/data is absent: the tests on the shared scenes skip" >&2
 fi
-ctest --test-dir build --output-on-failure -j "$(nproc)"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+status=0
+ctest --test-dir build --output-on-failure -j "$(nproc)" 2>&1 | tee "$log" || status=$?
+echo "test: $(grep -c '(Skipped)' "$log" || true) tests skipped (ctest lists them above)"
+exit "$status"

@@ -106,3 +106,21 @@ TEST(ErrorLine, ACorruptPngIsOneLineWithoutLibpngsOwn) {
     EXPECT_EQ(map.err.find("libpng error"), std::string::npos) << map.err;
   }
 }
+
+TEST(Cli, ABareLapflowListsEachCommandOnceAndExits0) {
+  TempDir dir("bare");
+  std::string out, err;
+  const int code = test::run_command(fmt::format("cd '{}' && '{}'", dir.str(), LAPFLOW_BINARY), &out, &err, dir);
+  EXPECT_EQ(code, 0) << err;
+  EXPECT_TRUE(err.empty()) << err;
+  for (const char* command : {"demo", "inspect", "atlas", "patches", "bake", "track", "render", "eval", "preview",
+                              "feature-map", "farm"}) {
+    const std::string line = fmt::format("\n  {:<12} ", command);
+    const std::size_t at = out.find(line);
+    ASSERT_NE(at, std::string::npos) << command << " not listed in:\n" << out;
+    EXPECT_EQ(out.find(line, at + 1), std::string::npos) << command << " listed twice";
+    const std::size_t end = out.find('\n', at + 1);
+    EXPECT_GT(end - at - line.size(), 10u) << command << " has no description";
+    EXPECT_LE(end - at, 120u) << "not one short line: " << out.substr(at + 1, end - at - 1);
+  }
+}

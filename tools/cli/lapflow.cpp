@@ -41,6 +41,23 @@ int main(int argc, char** argv) {
   cli::add_preview_command(app);
   cli::add_feature_map_command(app);
   cli::add_farm_command(app);
+  if (argc == 1) {
+    // A bare `lapflow`: what it is and its commands, one line each.
+    fmt::print("lapflow: deformable lapped textures on animated liquid surfaces.\n\nCommands:\n");
+    for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) {
+      // The description's first clause, on one line.
+      std::string d = sub->get_description();
+      std::replace(d.begin(), d.end(), '\n', ' ');
+      std::size_t end = d.size();
+      for (const char* stop : {". ", ": ", "; "}) end = std::min(end, d.find(stop));
+      d = d.substr(0, end);
+      if (d.size() > 100) d = d.substr(0, std::min(d.find(" ("), d.rfind(", ", 100)));
+      if (!d.empty() && d.back() == '.') d.pop_back();
+      fmt::print("  {:<12} {}\n", sub->get_name(), d);
+    }
+    fmt::print("\nRun 'lapflow <command> --help' for a command's options, 'lapflow --help' for more.\n");
+    return cli::kOk;
+  }
   try {
     // `lapflow bake scene.toml [options]`: the file's keys become options
     // placed before the user's, so the command line overrides the file.
