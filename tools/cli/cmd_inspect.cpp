@@ -1,118 +1,25 @@
-// `lapflow inspect`: what a user checks before a long bake. Reads every frame
-// (in parallel, results by index), reports topology problems and the velocity
-// each frame would be advected with, then a one-screen summary or JSON.
+// `lapflow inspect`: what a user checks before a long bake. The library reads
+// every frame (inspect_sequence, addons/inspect.hpp); this prints its
+// topology problems and the velocity each frame would be advected with, then
+// a one-screen summary or JSON.
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <exception>
-#include <mutex>
 #include <optional>
 
 #include "cli_common.hpp"
+#include "lapflow/addons/inspect.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/io/mesh_io.hpp"
-#include "lapflow/core/parallel.hpp"
-#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow::cli {
 namespace {
 
-struct InspectOptions {
-  std::string mesh_pattern;
-  std::string frames;
-  std::string vdb_pattern;
-  std::string grid_name;
+/// The command's options: the library's, and how to print.
+struct InspectCommandOptions : InspectOptions {
   bool json = false;
-  double min_speed = 0;
 };
-
-struct SpeedStats {
-  bool present = false;
-  double min = 0, mean = 0, max = 0;
-};
-
-struct FrameResult {
-  int frame = 0;
-  std::string file;
-  std::exception_ptr error;
-  std::string error_text;
-  MeshReport report;
-  SpeedStats vertex_speed;  ///< from the PLY's vertex properties
-  SpeedStats grid_speed;    ///< from the VDB sampled at the vertices
-  std::string grid_name;
-  double grid_difference = -1;  ///< sum |v_grid - v_vertex| / sum |v_vertex|; -1 = not measured
-  /// Sizes, speeds and property types no liquid has (units_problems): a
-  /// bake refuses the frame unless --units-ok.
-  std::vector<std::string> warnings;
-};
-
-/// Speeds over the referenced vertices, with --min-speed applied (slower = 0).
-SpeedStats speed_stats(const std::vector<Vec3>& v, const std::vector<uint8_t>& referenced, double min_speed) {
-  SpeedStats s;
-  s.present = true;
-  s.min = INFINITY;
-  double sum = 0;
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    if (!referenced[i]) continue;
-    double sp = norm(v[i]);
-    if (sp < min_speed) sp = 0;
-    s.min = std::min(s.min, sp);
-    s.max = std::max(s.max, sp);
-    sum += sp;
-    ++n;
-  }
-  if (n == 0) s.min = 0;
-  s.mean = n ? sum / double(n) : 0;
-  return s;
-}
-
-void inspect_frame(const InspectOptions& o, const FramePattern& mesh_pattern, const std::optional<FramePattern>& vdb,
-                   FrameResult& r) {
-  r.file = mesh_pattern.path(r.frame);
-  // Absurd bounds are read and reported here, not refused: the user runs
-  // inspect to find out what is wrong with the sequence.
-  const MeshFile file = read_mesh_file(r.file, false);
-  const TriMesh& m = file.mesh;
-  r.report = analyze_mesh(m);
-  r.warnings = units_problems(m, file.declared);
-  bool sampleable = true;  // OpenVDB's index space overflows beyond kMaxMeshCoordinate
-  try {
-    check_mesh_bounds(m, r.file);
-  } catch (const InputError&) {
-    sampleable = false;
-  }
-  std::vector<uint8_t> referenced(m.vertex_count(), 0);
-  for (const Tri& f : m.triangles)
-    for (int32_t x : f) referenced[x] = 1;
-  if (m.has_velocities()) r.vertex_speed = speed_stats(m.velocities, referenced, o.min_speed);
-  if (!vdb || !sampleable) return;
-  const VelocityGrid grid(vdb->path(r.frame), o.grid_name);
-  r.grid_name = grid.grid_name();
-  std::vector<Vec3> sampled(m.vertex_count());
-  parallel_for(sampled.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i)
-      if (referenced[i]) sampled[i] = grid.sample(m.positions[i]);
-  });
-  r.grid_speed = speed_stats(sampled, referenced, o.min_speed);
-  double fastest = 0;
-  std::size_t at = 0;
-  for (std::size_t i = 0; i < sampled.size(); ++i)
-    if (referenced[i] && norm(sampled[i]) > fastest) fastest = norm(sampled[i]), at = i;
-  if (!(fastest <= kMaxLiquidSpeed))
-    r.warnings.push_back(speed_problem(fastest, at, "the VDB grid '" + r.grid_name + "'"));
-  if (m.has_velocities()) {
-    double diff = 0, base = 0;
-    for (std::size_t i = 0; i < sampled.size(); ++i) {
-      if (!referenced[i]) continue;
-      diff += norm(sampled[i] - m.velocities[i]);
-      base += norm(m.velocities[i]);
-    }
-    r.grid_difference = base > 0 ? diff / base : (diff > 0 ? INFINITY : 0);
-  }
-}
-
-const SpeedStats& used_speed(const FrameResult& r) { return r.grid_speed.present ? r.grid_speed : r.vertex_speed; }
 
 /// "3, 7-9, 12"
 std::string frame_list(const std::vector<int>& frames) {
@@ -147,65 +54,11 @@ nlohmann::json speed_json(const SpeedStats& s) {
 }
 
 /// Totals over the readable frames (serial, in frame order).
-struct Summary {
-  std::size_t readable = 0;
-  std::vector<int> empty, unreadable;
-  std::size_t tri_min = SIZE_MAX, tri_max = 0;
-  int tri_min_frame = 0, tri_max_frame = 0;
-  double tri_mean = 0;
-  std::size_t non_manifold_edges = 0, non_manifold_vertices = 0, degenerate = 0, boundary = 0, isolated = 0;
-  std::vector<int> frames_with_non_manifold, frames_with_boundary, frames_without_velocity, frames_with_warnings;
-  Box3 bounds;
-  double peak_speed = 0;
-  int peak_frame = 0;
-  double worst_difference = -1, mean_difference = 0;
-  int worst_difference_frame = 0;
-};
-
-Summary summarize(const std::vector<FrameResult>& results) {
-  Summary s;
-  double tri_sum = 0, diff_sum = 0;
-  std::size_t diff_n = 0;
-  for (const FrameResult& r : results) {
-    if (r.error) {
-      s.unreadable.push_back(r.frame);
-      continue;
-    }
-    const MeshReport& m = r.report;
-    ++s.readable;
-    if (m.triangles == 0) s.empty.push_back(r.frame);
-    if (m.triangles < s.tri_min) s.tri_min = m.triangles, s.tri_min_frame = r.frame;
-    if (m.triangles > s.tri_max) s.tri_max = m.triangles, s.tri_max_frame = r.frame;
-    tri_sum += double(m.triangles);
-    s.non_manifold_edges += m.non_manifold_edges;
-    s.non_manifold_vertices += m.non_manifold_vertices;
-    if (m.non_manifold_edges + m.non_manifold_vertices > 0) s.frames_with_non_manifold.push_back(r.frame);
-    if (m.boundary_edges > 0) s.frames_with_boundary.push_back(r.frame);
-    if (!r.warnings.empty()) s.frames_with_warnings.push_back(r.frame);
-    s.degenerate += m.degenerate_triangles;
-    s.boundary += m.boundary_edges;
-    s.isolated += m.isolated_vertices;
-    if (!m.bounds.empty()) s.bounds.extend(m.bounds.lo), s.bounds.extend(m.bounds.hi);
-    const SpeedStats& sp = used_speed(r);
-    if (!sp.present && m.triangles > 0) s.frames_without_velocity.push_back(r.frame);
-    if (sp.present && sp.max > s.peak_speed) s.peak_speed = sp.max, s.peak_frame = r.frame;
-    if (r.grid_difference >= 0) {
-      diff_sum += r.grid_difference;
-      ++diff_n;
-      if (r.grid_difference > s.worst_difference) s.worst_difference = r.grid_difference, s.worst_difference_frame = r.frame;
-    }
-  }
-  if (s.readable == 0) s.tri_min = 0;
-  s.tri_mean = s.readable ? tri_sum / double(s.readable) : 0;
-  s.mean_difference = diff_n ? diff_sum / double(diff_n) : -1;
-  return s;
-}
-
-void print_table(const std::vector<FrameResult>& results, bool with_grid) {
+void print_table(const std::vector<FrameInspection>& results, bool with_grid) {
   fmt::print("{:>6} {:>9} {:>9} {:>5} {:>7} {:>7} {:>6} {:>8}  {:<24} {:<10} {}\n", "frame", "triangles", "vertices",
              "comps", "nm-edge", "nm-vert", "degen", "boundary", "speed min/mean/max m/s", "source",
              with_grid ? "grid-vs-vertex  bounding box" : "bounding box");
-  for (const FrameResult& r : results) {
+  for (const FrameInspection& r : results) {
     if (r.error) {
       fmt::print("{:>6} unreadable: {}\n", r.frame, r.error_text);
       continue;
@@ -222,7 +75,7 @@ void print_table(const std::vector<FrameResult>& results, bool with_grid) {
   }
 }
 
-void print_summary(const InspectOptions& o, const std::vector<FrameResult>& results, const Summary& s) {
+void print_summary(const InspectCommandOptions& o, const std::vector<FrameInspection>& results, const InspectSummary& s) {
   const int first = results.front().frame, last = results.back().frame;
   fmt::print("\nSummary of {}\n", o.mesh_pattern);
   fmt::print("  frames            {} ({}-{}), {} readable\n", results.size(), first, last, s.readable);
@@ -237,8 +90,8 @@ void print_summary(const InspectOptions& o, const std::vector<FrameResult>& resu
   fmt::print("  degenerate tris   {} (legal)\n", s.degenerate);
   fmt::print("  isolated vertices {}\n", s.isolated);
   fmt::print("  bounding box      {}\n", box_text(s.bounds));
-  const bool any_grid = std::any_of(results.begin(), results.end(), [](const FrameResult& r) { return r.grid_speed.present; });
-  const bool any_vertex = std::any_of(results.begin(), results.end(), [](const FrameResult& r) { return r.vertex_speed.present; });
+  const bool any_grid = std::any_of(results.begin(), results.end(), [](const FrameInspection& r) { return r.grid_speed.present; });
+  const bool any_vertex = std::any_of(results.begin(), results.end(), [](const FrameInspection& r) { return r.vertex_speed.present; });
   std::string source = "none";
   if (any_grid) source = fmt::format("OpenVDB grid '{}' ({})", results.front().grid_name, o.vdb_pattern);
   else if (any_vertex) source = "per-vertex PLY properties";
@@ -259,16 +112,16 @@ void print_summary(const InspectOptions& o, const std::vector<FrameResult>& resu
 }
 
 /// "file (frame N): problem", as an error names a frame.
-std::string warning_text(const FrameResult& r, const std::string& problem) {
+std::string warning_text(const FrameInspection& r, const std::string& problem) {
   return InputError(r.file, problem, r.frame).what();
 }
 
 /// The units warnings on stderr, the first frames' in full: a sequence whose
 /// every frame is in millimetres must not bury the summary.
-void print_warnings(const std::vector<FrameResult>& results) {
+void print_warnings(const std::vector<FrameInspection>& results) {
   constexpr std::size_t kFramesShown = 5;
   std::size_t shown = 0, more = 0;
-  for (const FrameResult& r : results) {
+  for (const FrameInspection& r : results) {
     if (r.warnings.empty()) continue;
     if (shown == kFramesShown) {
       ++more;
@@ -280,11 +133,11 @@ void print_warnings(const std::vector<FrameResult>& results) {
   if (more > 0) warn("{} more frames have such warnings (--json lists them all)", more);
 }
 
-nlohmann::json to_json(const InspectOptions& o, const std::vector<FrameResult>& results, const Summary& s) {
+nlohmann::json to_json(const InspectCommandOptions& o, const std::vector<FrameInspection>& results, const InspectSummary& s) {
   nlohmann::json frames = nlohmann::json::array(), all_warnings = nlohmann::json::array();
-  for (const FrameResult& r : results)
+  for (const FrameInspection& r : results)
     for (const std::string& w : r.warnings) all_warnings.push_back(warning_text(r, w));
-  for (const FrameResult& r : results) {
+  for (const FrameInspection& r : results) {
     nlohmann::json f = {{"frame", r.frame}, {"file", r.file}};
     if (r.error) {
       f["error"] = r.error_text;
@@ -330,52 +183,30 @@ nlohmann::json to_json(const InspectOptions& o, const std::vector<FrameResult>& 
           {"frames", std::move(frames)}, {"summary", std::move(summary)}};
 }
 
-void run_inspect(const InspectOptions& o) {
+void run_inspect(const InspectCommandOptions& o) {
   apply_global_options();
-  const FramePattern mesh_pattern(o.mesh_pattern);
-  std::optional<FrameRange> range;
-  if (!o.frames.empty()) range = parse_frame_range(o.frames);
-  const std::vector<int> frames = resolve_frames(mesh_pattern, range);
-  std::optional<FramePattern> vdb;
-  if (!o.vdb_pattern.empty()) vdb.emplace(o.vdb_pattern);
+  std::optional<Progress> progress;
+  const std::vector<FrameInspection> results = inspect_sequence(o, [&](int frame, std::size_t total) {
+    if (!progress) progress.emplace("inspect", total);
+    progress->step(fmt::format("frame {}", frame));
+  });
+  if (progress) progress->finish();
+  const bool with_grid = !o.vdb_pattern.empty();
 
-  std::vector<FrameResult> results(frames.size());
-  Progress progress("inspect", frames.size());
-  std::mutex progress_mutex;
-  parallel_for(frames.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      FrameResult& r = results[i];
-      r.frame = frames[i];
-      try {
-        inspect_frame(o, mesh_pattern, vdb, r);
-      } catch (const InputError& err) {
-        // One bad frame must not hide the others: record it, report all.
-        r.error = std::make_exception_ptr(err.with_frame(r.frame));
-        r.error_text = printable_line(err.with_frame(r.frame).what());
-      } catch (const std::exception& err) {
-        r.error = std::current_exception();
-        r.error_text = printable_line(err.what());
-      }
-      std::lock_guard lock(progress_mutex);
-      progress.step(fmt::format("frame {}", r.frame));
-    }
-  }, 1);
-  progress.finish();
-
-  const Summary s = summarize(results);
+  const InspectSummary s = summarize(results);
   if (o.json) {
     // Invalid UTF-8 in a path would make dump() throw: replaced instead.
     fmt::print("{}\n", to_json(o, results, s).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
-    print_table(results, vdb.has_value());
+    print_table(results, with_grid);
     print_summary(o, results, s);
   }
   // Warnings do not change the exit code: inspect reports, the bake refuses.
   print_warnings(results);
   // Exit code 2 when any frame is unreadable: print every error, in frame
   // order; main prints the last one as it propagates.
-  std::vector<const FrameResult*> bad;
-  for (const FrameResult& r : results)
+  std::vector<const FrameInspection*> bad;
+  for (const FrameInspection& r : results)
     if (r.error) bad.push_back(&r);
   for (std::size_t i = 0; i + 1 < bad.size(); ++i) print_error(bad[i]->error_text);
   if (!bad.empty()) std::rethrow_exception(bad.back()->error);
@@ -384,7 +215,7 @@ void run_inspect(const InspectOptions& o) {
 }  // namespace
 
 void add_inspect_command(CLI::App& app) {
-  static InspectOptions o;
+  static InspectCommandOptions o;
   auto* cmd = app.add_subcommand("inspect", "Check a fluid mesh sequence (and its velocities) before a bake");
   cmd->description(
       "Reads every frame of a liquid surface sequence and reports, per frame: triangles, vertices, connected\n"
