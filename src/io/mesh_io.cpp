@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <regex>
 #include <string_view>
 
 #include "lapflow/io/atomic_file.hpp"
@@ -736,6 +737,14 @@ void write_ply(const std::string& path, const TriMesh& m) {
     put(t[0]), put(t[1]), put(t[2]);
   }
   write_text_atomically(path, out);  // binary-safe: writes the bytes as they are
+}
+
+std::string default_output_name(const std::string& mesh_pattern) {
+  std::string name = fs::path(mesh_pattern).filename().string();
+  // Drop the extension and the frame token with its separator.
+  name = std::regex_replace(name, std::regex(R"(\.[A-Za-z]+$)"), "");
+  name = std::regex_replace(name, std::regex(R"([._-]?(%0?\d*d|#+|\$F\d?)$)"), "");
+  return name.empty() ? "lapflow" : name;
 }
 
 }  // namespace lapflow

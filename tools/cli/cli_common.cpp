@@ -150,14 +150,6 @@ void resolve_exemplar_paths(std::string& color, std::string& feature, std::strin
   if (displacement.empty()) displacement = find_sibling(path.parent_path(), stem + ".disp");
 }
 
-std::string default_output_name(const std::string& mesh_pattern) {
-  std::string name = fs::path(mesh_pattern).filename().string();
-  // Drop the extension and the frame token with its separator.
-  name = std::regex_replace(name, std::regex(R"(\.[A-Za-z]+$)"), "");
-  name = std::regex_replace(name, std::regex(R"([._-]?(%0?\d*d|#+|\$F\d?)$)"), "");
-  return name.empty() ? "lapflow" : name;
-}
-
 bool parse_orientation(const std::string& text, lapflow::Vec3& direction) {
   if (text == "random") return false;
   std::smatch m;

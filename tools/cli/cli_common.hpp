@@ -93,8 +93,6 @@ class Progress {
 void resolve_exemplar_paths(std::string& color, std::string& feature, std::string& displacement);
 /// Folder of the shipped exemplars.
 std::string exemplar_dir();
-/// `dam_break` for `/data/dam_break.%04d.ply`.
-std::string default_output_name(const std::string& mesh_pattern);
 /// "random" -> false; "world:x,y,z" -> true and the direction. Throws UsageError.
 bool parse_orientation(const std::string& text, lapflow::Vec3& direction);
 /// "2" or "all (2)".

@@ -1,14 +1,6 @@
 // `lapflow farm`: one bake split into jobs for a render farm (docs/farm.md).
-// Tracking (`lapflow track`) carries the patches from frame to frame, so it
-// is one chain of jobs of K frames each; rendering (`lapflow render`) needs
-// only a frame's state, so each chunk's frames are one array job that starts
-// as soon as that chunk is tracked. `farm slurm` writes the sbatch scripts
-// into OUT/farm/ and submits them; `farm status` reads the progress from the
-// files in OUT.
-#include <poll.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
+// The plan, the scripts, the submission and the status are the library's
+// (bake/farm.hpp); this parses, prints and runs the submission loop.
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -21,6 +13,7 @@
 
 #include "cli_common.hpp"
 #include "scene_file.hpp"
+#include "lapflow/bake/farm.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/io/atomic_file.hpp"
@@ -31,400 +24,6 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-/// Written with the scripts into OUT/farm/: what was submitted, for `farm status`.
-constexpr const char* kFarmRecord = "farm.json";
-/// The line every job script prints last, with lapflow's exit code.
-constexpr const char* kExitMarker = "lapflow farm: exit ";
-/// Slurm's default MaxArraySize is 1001: array indices 0-1000.
-constexpr int kMaxChunk = 1000;
-
-// ---- the bake's options, as `lapflow track` will read them -----------------
-
-/// What the farm needs from a bake's options; as in `lapflow bake`, the last
-/// occurrence of an option wins and the command line overrides a scene file.
-struct BakeArguments {
-  std::string out, name, mesh, frames;
-  int threads = 0;  ///< 0 = all cores
-  bool quiet = false;
-};
-
-BakeArguments scan_bake_arguments(const std::vector<std::string>& verbatim) {
-  std::vector<std::string> args{"track"};
-  args.insert(args.end(), verbatim.begin(), verbatim.end());
-  expand_scene_files(args);
-  BakeArguments b;
-  std::string threads;
-  for (std::size_t i = 1; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    // `--opt VALUE` or `--opt=VALUE`.
-    auto value = [&](const std::string& option, std::string& into) {
-      if (a == option) {
-        if (i + 1 >= args.size()) throw UsageError(option + " needs a value");
-        into = args[++i];
-        return true;
-      }
-      if (a.rfind(option + "=", 0) != 0) return false;
-      into = a.substr(option.size() + 1);
-      return true;
-    };
-    if (value("--out", b.out) || value("--name", b.name) || value("--mesh", b.mesh) || value("--frames", b.frames) ||
-        value("--threads", threads))
-      continue;
-    if (a == "--quiet" || a == "-q") b.quiet = true;
-    if (a.rfind("--quiet=", 0) == 0) b.quiet = a != "--quiet=false" && a != "--quiet=0";
-  }
-  if (!threads.empty()) {
-    std::size_t used = 0;
-    try {
-      b.threads = std::stoi(threads, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != threads.size() || b.threads < 0)
-      throw UsageError("--threads: '" + threads + "' is not a count of threads (0 = all cores)");
-  }
-  return b;
-}
-
-/// The frames of the bake: --frames, else every frame on disk, which must
-/// then be one range (the jobs are given it as A-B).
-FrameRange bake_frames(const BakeArguments& b) {
-  if (b.mesh.empty())
-    throw UsageError("--mesh is required (on the command line or in the scene file): the farm checks its frames");
-  const FramePattern pattern(b.mesh);
-  std::optional<FrameRange> range;
-  if (!b.frames.empty()) range = parse_frame_range(b.frames);
-  const std::vector<int> frames = resolve_frames(pattern, range);
-  for (std::size_t i = 1; i < frames.size(); ++i)
-    if (frames[i] != frames[i - 1] + 1)
-      throw InputError(pattern.path(frames[i - 1] + 1), "file not found: frame " + std::to_string(frames[i - 1] + 1) +
-                                                            " is missing between frames " +
-                                                            std::to_string(frames.front()) + " and " +
-                                                            std::to_string(frames.back()) +
-                                                            "; give --frames for the range to bake");
-  return {frames.front(), frames.back()};
-}
-
-// ---- the plan: chunks, scripts, commands -----------------------------------
-
-struct Chunk {
-  int first = 0, last = 0;
-  std::string track_script, render_script;  ///< absolute paths
-  std::string track_job, render_job;        ///< Slurm job ids once submitted
-};
-
-struct FarmPlan {
-  std::vector<std::string> command;    ///< the farm command line itself, for re-submitting
-  std::vector<std::string> bake_args;  ///< passed to every `lapflow track` verbatim
-  std::string lapflow;                 ///< absolute path of the binary the jobs run
-  std::string cwd;                     ///< where the bake's relative paths start
-  std::string dir, name;               ///< absolute --out, NAME
-  FrameRange frames;
-  int chunk = 0;
-  int threads = 0;
-  bool quiet = false;
-  std::string partition;
-  std::vector<Chunk> chunks;
-
-  std::string farm_dir() const { return (fs::path(dir) / "farm").string(); }
-  std::string log_dir() const { return (fs::path(dir) / "farm" / "logs").string(); }
-};
-
-/// Frame numbers in file names: 4 digits, like the bake's own files.
-std::string frame_label(int first, int last) { return fmt::format("{:04d}-{:04d}", first, last); }
-
-std::string track_log(const FarmPlan& p, const Chunk& c) {
-  return (fs::path(p.log_dir()) / ("track." + frame_label(c.first, c.last) + ".log")).string();
-}
-/// Slurm names it per array task: %a is the frame's index in its chunk.
-std::string render_log(const FarmPlan& p, const Chunk& c, const std::string& index) {
-  return (fs::path(p.log_dir()) / ("render." + frame_label(c.first, c.last) + "." + index + ".log")).string();
-}
-
-/// `s` as one shell word.
-std::string shell_quote(const std::string& s) {
-  const bool plain = !s.empty() && std::all_of(s.begin(), s.end(), [](char c) {
-    return std::isalnum(static_cast<unsigned char>(c)) || std::strchr("-_./=:,+@%", c) != nullptr;
-  });
-  if (plain) return s;
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::string shell_words(const std::vector<std::string>& words) {
-  std::string line;
-  for (const std::string& w : words) line += (line.empty() ? "" : " ") + shell_quote(w);
-  return line;
-}
-
-/// An `#SBATCH` value: sbatch reads double quotes there, not single ones.
-std::string sbatch_value(const std::string& s) {
-  return s.find_first_of(" \t") == std::string::npos ? s : "\"" + s + "\"";
-}
-
-/// The `#SBATCH` lines both kinds of job share: name, log, CPUs, partition.
-std::string sbatch_header(const FarmPlan& p, const std::string& job_name, const std::string& log) {
-  std::string h = "#!/bin/bash\n";
-  h += "#SBATCH --job-name=" + sbatch_value(job_name) + "\n";
-  h += "#SBATCH --output=" + sbatch_value(log) + "\n";
-  // --threads N reserves N CPUs; 0 (lapflow's default: all cores) a whole node.
-  h += p.threads > 0 ? fmt::format("#SBATCH --cpus-per-task={}\n", p.threads) : "#SBATCH --exclusive\n";
-  if (!p.partition.empty()) h += "#SBATCH --partition=" + sbatch_value(p.partition) + "\n";
-  return h;
-}
-
-/// The lines that end every job: lapflow's exit code, in the log for `farm status`, and as the job's.
-std::string exit_lines() {
-  return fmt::format("code=$?\necho \"{}$code\"\nexit \"$code\"\n", kExitMarker);
-}
-
-std::vector<std::string> track_command(const FarmPlan& p, const Chunk& c) {
-  std::vector<std::string> cmd{p.lapflow, "track"};
-  cmd.insert(cmd.end(), p.bake_args.begin(), p.bake_args.end());
-  // The whole range every time, so that every chunk writes the same manifest.
-  cmd.insert(cmd.end(), {"--frames", fmt::format("{}-{}", p.frames.first, p.frames.last), "--resume", "--until",
-                         std::to_string(c.last)});
-  return cmd;
-}
-
-/// The commands that re-run one frame's rendering and one chunk's tracking alone.
-std::string render_rerun(const Chunk& c, int frame) {
-  return fmt::format("sbatch --array={} {}", frame - c.first, shell_quote(c.render_script));
-}
-std::string track_rerun(const Chunk& c) { return "sbatch " + shell_quote(c.track_script); }
-
-std::string track_script(const FarmPlan& p, const Chunk& c, std::size_t k) {
-  std::string s = sbatch_header(p, p.name + ".track." + frame_label(c.first, c.last), track_log(p, c));
-  s += fmt::format(
-      "# lapflow farm, {}: tracking of frames {}-{} (chunk {} of {}, frames {}-{}), written by\n"
-      "# `lapflow farm slurm`; submitted to run after the previous chunk's tracking succeeded (afterok).\n"
-      "# `lapflow track --resume` continues after the last tracked frame, so this re-runs the chunk alone\n"
-      "# (a no-op once it is done): {}\n",
-      p.name, c.first, c.last, k + 1, p.chunks.size(), p.frames.first, p.frames.last, track_rerun(c));
-  s += "cd " + shell_quote(p.cwd) + " || exit 2\n";
-  s += shell_words(track_command(p, c)) + "\n";
-  return s + exit_lines();
-}
-
-std::string render_script(const FarmPlan& p, const Chunk& c, std::size_t k) {
-  std::string s = sbatch_header(p, p.name + ".render." + frame_label(c.first, c.last), render_log(p, c, "%a"));
-  s += fmt::format("#SBATCH --array=0-{}\n", c.last - c.first);
-  s += fmt::format(
-      "# lapflow farm, {}: rendering of frames {}-{} (chunk {} of {}), one array task per frame: task I\n"
-      "# renders frame {} + I; submitted to run after the tracking of these frames succeeded (afterok).\n"
-      "# Re-run frame F alone: sbatch --array=$((F - {})) {}\n",
-      p.name, c.first, c.last, k + 1, p.chunks.size(), c.first, c.first, shell_quote(c.render_script));
-  s += fmt::format("frame=$(({} + ${{SLURM_ARRAY_TASK_ID:?is not set: submit with sbatch --array=I}}))\n", c.first);
-  s += "echo \"lapflow farm: frame $frame\"\n";
-  std::vector<std::string> cmd{p.lapflow, "render", p.dir, "--name", p.name};
-  std::string line = shell_words(cmd) + " --frames \"$frame-$frame\" --skip-done";
-  if (p.threads > 0) line += fmt::format(" --threads {}", p.threads);
-  if (p.quiet) line += " --quiet";
-  s += line + "\n";
-  return s + exit_lines();
-}
-
-/// `sbatch --parsable [--dependency=afterok:AFTER --kill-on-invalid-dep=yes] SCRIPT`: tracking chunk k
-/// runs after tracking chunk k-1, rendering chunk k after tracking chunk k.
-std::vector<std::string> sbatch_arguments(const std::string& script, const std::string& after) {
-  std::vector<std::string> a{"sbatch", "--parsable"};
-  // A failed dependency cancels the jobs waiting for it, instead of leaving them pending for ever.
-  if (!after.empty()) a.insert(a.end(), {"--dependency=afterok:" + after, "--kill-on-invalid-dep=yes"});
-  a.push_back(script);
-  return a;
-}
-
-FarmPlan make_plan(const std::vector<std::string>& command, const std::vector<std::string>& bake_args, int chunk,
-                   const std::string& partition, const std::string& binary) {
-  FarmPlan p;
-  p.command = command;
-  p.bake_args = bake_args;
-  const BakeArguments b = scan_bake_arguments(bake_args);
-  if (b.out.empty())
-    throw UsageError("--out is required (on the command line or in the scene file): the folder the jobs bake into");
-  if (chunk < 1) throw UsageError(fmt::format("--chunk {}: a chunk holds at least 1 frame", chunk));
-  if (chunk > kMaxChunk)
-    throw UsageError(fmt::format("--chunk {}: at most {} frames, the array tasks of one chunk (Slurm's default "
-                                 "MaxArraySize is 1001)",
-                                 chunk, kMaxChunk));
-  p.frames = bake_frames(b);
-  p.chunk = chunk;
-  p.threads = b.threads;
-  p.quiet = b.quiet;
-  p.partition = partition;
-  p.cwd = fs::current_path().string();
-  p.dir = fs::absolute(b.out).lexically_normal().string();
-  if (p.dir.size() > 1 && p.dir.back() == '/') p.dir.pop_back();
-  p.name = b.name.empty() ? default_output_name(b.mesh) : b.name;
-  std::error_code ec;
-  p.lapflow = binary.empty() ? fs::read_symlink("/proc/self/exe", ec).string() : fs::absolute(binary).string();
-  if (p.lapflow.empty()) throw UsageError("cannot find this program's path in /proc/self/exe: give --binary");
-  // Slurm reads %x in an #SBATCH --output path as a pattern, and no quoting saves a newline.
-  for (const std::string* path : {&p.dir, &p.lapflow, &p.cwd})
-    if (path->find_first_of("\n\r\"%") != std::string::npos)
-      throw UsageError("'" + *path + "': a path with a newline, a double quote or a % cannot go into an sbatch script");
-
-  for (int64_t first = p.frames.first; first <= p.frames.last; first += chunk) {
-    Chunk c;
-    c.first = int(first);
-    c.last = int(std::min<int64_t>(first + chunk - 1, p.frames.last));
-    c.track_script = (fs::path(p.farm_dir()) / ("track." + frame_label(c.first, c.last) + ".sh")).string();
-    c.render_script = (fs::path(p.farm_dir()) / ("render." + frame_label(c.first, c.last) + ".sh")).string();
-    p.chunks.push_back(c);
-  }
-  return p;
-}
-
-// ---- writing and submitting ------------------------------------------------
-
-json plan_json(const FarmPlan& p, bool submitted) {
-  json chunks = json::array();
-  for (const Chunk& c : p.chunks)
-    chunks.push_back({{"first", c.first},
-                      {"last", c.last},
-                      {"track_script", c.track_script},
-                      {"render_script", c.render_script},
-                      {"track_log", track_log(p, c)},
-                      {"render_log", render_log(p, c, "%a")},
-                      {"track_job", c.track_job},
-                      {"render_job", c.render_job}});
-  return {{"version", 1},          {"scheduler", "slurm"}, {"submitted", submitted}, {"command", p.command},
-          {"dir", p.dir},          {"name", p.name},       {"first", p.frames.first}, {"last", p.frames.last},
-          {"chunk", p.chunk},      {"lapflow", p.lapflow}, {"cwd", p.cwd},           {"bake_args", p.bake_args},
-          {"chunks", chunks}};
-}
-
-void write_record(const FarmPlan& p, bool submitted) {
-  write_text_atomically((fs::path(p.farm_dir()) / kFarmRecord).string(),
-                        plan_json(p, submitted).dump(2, ' ', false, json::error_handler_t::replace) + "\n");
-}
-
-/// The submission as a shell script, what `farm slurm` runs: for a look, or
-/// for a later `bash OUT/farm/submit.sh` after --dry-run.
-std::string submit_script(const FarmPlan& p) {
-  std::string s = fmt::format(
-      "#!/bin/bash\n"
-      "# lapflow farm, {}: submits the tracking chain and the rendering arrays of frames {}-{} in chunks of {}.\n"
-      "# Written by `lapflow farm slurm`, which submits the same commands.\n"
-      "set -e\n",
-      p.name, p.frames.first, p.frames.last, p.chunk);
-  for (std::size_t k = 0; k < p.chunks.size(); ++k) {
-    // sbatch_arguments() with the previous job's id from a shell variable.
-    const std::string after =
-        k == 0 ? "" : fmt::format(" --dependency=afterok:${{t{}%%;*}} --kill-on-invalid-dep=yes", k);
-    s += fmt::format("t{}=$(sbatch --parsable{} {})\n", k + 1, after, shell_quote(p.chunks[k].track_script));
-    s += fmt::format("r{0}=$(sbatch --parsable --dependency=afterok:${{t{0}%%;*}} --kill-on-invalid-dep=yes {1})\n",
-                     k + 1, shell_quote(p.chunks[k].render_script));
-  }
-  return s;
-}
-
-void write_scripts(const FarmPlan& p) {
-  std::error_code ec;
-  fs::create_directories(p.log_dir(), ec);
-  if (ec || !fs::is_directory(p.log_dir()))
-    throw OutputError(p.log_dir() + ": cannot create the farm's folder: " + ec.message());
-  auto write_script = [](const std::string& path, const std::string& text) {
-    write_text_atomically(path, text);
-    std::error_code e;
-    fs::permissions(path, fs::perms::owner_exec | fs::perms::group_exec | fs::perms::others_exec,
-                    fs::perm_options::add, e);
-  };
-  for (std::size_t k = 0; k < p.chunks.size(); ++k) {
-    write_script(p.chunks[k].track_script, track_script(p, p.chunks[k], k));
-    write_script(p.chunks[k].render_script, render_script(p, p.chunks[k], k));
-  }
-  write_script((fs::path(p.farm_dir()) / "submit.sh").string(), submit_script(p));
-}
-
-struct Captured {
-  int exit_code = 0;
-  std::string out, err;
-};
-
-/// Runs `argv` (found on PATH) and returns its exit code, stdout and stderr.
-Captured run_captured(const std::vector<std::string>& argv) {
-  int out_pipe[2], err_pipe[2];
-  if (::pipe(out_pipe) != 0) throw std::runtime_error("pipe: " + std::string(std::strerror(errno)));
-  if (::pipe(err_pipe) != 0) {
-    ::close(out_pipe[0]);
-    ::close(out_pipe[1]);
-    throw std::runtime_error("pipe: " + std::string(std::strerror(errno)));
-  }
-  std::vector<std::string> args = argv;
-  std::vector<char*> cargs;
-  for (std::string& a : args) cargs.push_back(a.data());
-  cargs.push_back(nullptr);
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    const int error = errno;
-    for (int fd : {out_pipe[0], out_pipe[1], err_pipe[0], err_pipe[1]}) ::close(fd);
-    throw std::runtime_error("fork: " + std::string(std::strerror(error)));
-  }
-  if (pid == 0) {
-    ::dup2(out_pipe[1], STDOUT_FILENO);
-    ::dup2(err_pipe[1], STDERR_FILENO);
-    ::close(out_pipe[0]);
-    ::close(err_pipe[0]);
-    ::execvp(cargs[0], cargs.data());
-    ::_exit(127);
-  }
-  ::close(out_pipe[1]);
-  ::close(err_pipe[1]);
-  Captured r;
-  pollfd fds[2] = {{out_pipe[0], POLLIN, 0}, {err_pipe[0], POLLIN, 0}};
-  std::string* into[2] = {&r.out, &r.err};
-  int open = 2;
-  while (open > 0) {
-    if (::poll(fds, 2, -1) < 0) {
-      if (errno == EINTR) continue;
-      break;
-    }
-    for (int i = 0; i < 2; ++i) {
-      if (fds[i].fd < 0 || fds[i].revents == 0) continue;
-      char buf[4096];
-      const ssize_t n = ::read(fds[i].fd, buf, sizeof buf);
-      if (n > 0) {
-        into[i]->append(buf, std::size_t(n));
-      } else if (n == 0 || errno != EINTR) {
-        ::close(fds[i].fd);
-        fds[i].fd = -1;
-        --open;
-      }
-    }
-  }
-  for (pollfd& f : fds)
-    if (f.fd >= 0) ::close(f.fd);
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
-}
-
-std::string trimmed(std::string s) {
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.pop_back();
-  std::size_t b = 0;
-  while (b < s.size() && std::isspace(static_cast<unsigned char>(s[b]))) ++b;
-  return s.substr(b);
-}
-
-/// Submits with `sbatch --parsable` and returns the job id.
-std::string submit(const std::vector<std::string>& args) {
-  const Captured r = run_captured(args);
-  if (r.exit_code == 127 && r.out.empty())
-    throw UsageError("sbatch not found on PATH: run `lapflow farm slurm` on a Slurm submit host, or --dry-run to only "
-                     "write the scripts");
-  const std::string out = trimmed(r.out);
-  const std::string id = out.substr(0, out.find(';'));  // --parsable: "ID" or "ID;CLUSTER"
-  const bool numeric = !id.empty() && std::all_of(id.begin(), id.end(), [](char c) { return c >= '0' && c <= '9'; });
-  if (r.exit_code != 0 || !numeric)
-    throw UsageError(fmt::format("`{}` failed (exit {}): {}", shell_words(args), r.exit_code,
-                                 trimmed(r.err).empty() ? "no job id printed: '" + out + "'" : trimmed(r.err)));
-  return id;
-}
-
 struct SlurmCli {
   int chunk = 0;
   std::string partition, binary;
@@ -432,157 +31,66 @@ struct SlurmCli {
 };
 
 void run_slurm(const SlurmCli& c, const std::vector<std::string>& command, const std::vector<std::string>& bake_args) {
-  FarmPlan p = make_plan(command, bake_args, c.chunk, c.partition, c.binary);
+  std::vector<std::string> expanded{"track"};
+  expanded.insert(expanded.end(), bake_args.begin(), bake_args.end());
+  expand_scene_files(expanded);
+  expanded.erase(expanded.begin());
+  FarmPlan p = make_farm_plan(command, bake_args, expanded, c.chunk, c.partition, c.binary);
   globals().quiet = p.quiet;
-  write_scripts(p);
+  write_farm_scripts(p);
   info("lapflow farm slurm: {} frames {}-{} into {} in {} chunks of {}; scripts in {}", p.name, p.frames.first,
        p.frames.last, p.dir, p.chunks.size(), p.chunk, p.farm_dir());
   const std::string submit_path = (fs::path(p.farm_dir()) / "submit.sh").string();
   if (c.dry_run) {
-    write_record(p, false);
-    const std::string script = submit_script(p);
+    write_farm_record(p, false);
+    const std::string script = farm_submit_script(p);
     fmt::print("# --dry-run: nothing submitted; `bash {}` would submit:\n{}", shell_quote(submit_path),
                script.substr(script.find("set -e\n") + 7));
     return;
   }
   for (std::size_t k = 0; k < p.chunks.size(); ++k) {
-    Chunk& ch = p.chunks[k];
+    FarmChunk& ch = p.chunks[k];
     for (const bool track : {true, false}) {
       const std::vector<std::string> args =
           track ? sbatch_arguments(ch.track_script, k > 0 ? p.chunks[k - 1].track_job : "")
                 : sbatch_arguments(ch.render_script, ch.track_job);
       try {
-        (track ? ch.track_job : ch.render_job) = submit(args);
+        (track ? ch.track_job : ch.render_job) = sbatch_submit(args);
       } catch (...) {
-        write_record(p, false);  // with the ids submitted so far
+        write_farm_record(p, false);  // with the ids submitted so far
         throw;
       }
       fmt::print("{}   # job {}: {} {}-{}\n", shell_words(args), track ? ch.track_job : ch.render_job,
                  track ? "tracking" : "rendering", ch.first, ch.last);
     }
   }
-  write_record(p, true);
-  const Chunk& last = p.chunks.back();
+  write_farm_record(p, true);
+  const FarmChunk& last = p.chunks.back();
   fmt::print(
       "submitted {} tracking jobs and {} rendering arrays; job ids in {}\n"
       "progress:           {} farm status {} --name {}\n"
       "re-run frame F:     sbatch --array=$((F - FIRST)) {}/render.FIRST-LAST.sh, e.g. frame {}: {}\n"
       "re-run a tracking chunk: {} (it continues after the last tracked frame)\n",
-      p.chunks.size(), p.chunks.size(), (fs::path(p.farm_dir()) / kFarmRecord).string(), shell_quote(p.lapflow),
+      p.chunks.size(), p.chunks.size(), p.record_path(), shell_quote(p.lapflow),
       shell_quote(p.dir), shell_quote(p.name), p.farm_dir(), last.last, render_rerun(last, last.last),
       track_rerun(last));
 }
-
-// ---- status ------------------------------------------------------------------
-
-/// lapflow's exit code from a job's log (the line exit_lines() prints), if it got there.
-std::optional<int> logged_exit(const std::string& log) {
-  std::ifstream in(log);
-  std::string line;
-  std::optional<int> code;
-  while (std::getline(in, line))
-    if (line.rfind(kExitMarker, 0) == 0) {
-      try {
-        code = std::stoi(line.substr(std::strlen(kExitMarker)));
-      } catch (const std::exception&) {
-      }
-    }
-  return code;
-}
-
-enum class FrameStatus { Rendered, Tracked, Failed, Pending };
-const char* status_name(FrameStatus s) {
-  switch (s) {
-    case FrameStatus::Rendered: return "rendered";
-    case FrameStatus::Tracked: return "tracked";
-    case FrameStatus::Failed: return "failed";
-    case FrameStatus::Pending: return "pending";
-  }
-  return "";
-}
-
-struct FrameReport {
-  int frame = 0;
-  FrameStatus status = FrameStatus::Pending;
-  std::string rerun;  ///< for a failed frame: the command that re-runs it
-};
 
 struct StatusCli {
   std::string dir, name;
   bool json = false;
 };
 
-/// OUT/farm/farm.json when it belongs to the bake `name` ("" = any), else null.
-json read_farm_record(const std::string& dir, const std::string& name) {
-  const std::string path = (fs::path(dir) / "farm" / kFarmRecord).string();
-  if (!fs::is_regular_file(path)) return nullptr;
-  std::ifstream in(path);
-  json r = json::parse(in, nullptr, false);
-  const bool usable = !r.is_discarded() && r.is_object() && r.value("name", json()).is_string() &&
-                      r.value("first", json()).is_number_integer() && r.value("last", json()).is_number_integer() &&
-                      r.value("chunks", json()).is_array() && r.value("command", json()).is_array();
-  if (!usable || (!name.empty() && r["name"] != name)) return nullptr;
-  return r;
-}
-
-/// The status of frame `f` of bake `m`; `record` (maybe null) adds what the farm's job logs say.
-FrameReport frame_report(const BakeManifest& m, const json& record, int f) {
-  FrameReport r{f, FrameStatus::Pending, ""};
-  std::error_code ec;
-  const bool tracked = fs::exists(m.frame_file("state", f), ec);
-  r.status = fs::exists(m.frame_file("obj", f), ec) ? FrameStatus::Rendered
-             : tracked                                ? FrameStatus::Tracked
-                                                      : FrameStatus::Pending;
-  if (r.status == FrameStatus::Rendered || record.is_null()) return r;
-  for (const json& j : record["chunks"]) {
-    Chunk ch;
-    ch.first = j.value("first", 0);
-    ch.last = j.value("last", -1);
-    if (f < ch.first || f > ch.last) continue;
-    ch.render_script = j.value("render_script", "");
-    // A job that ended with a non-zero exit code said so last in its log.
-    if (tracked) {
-      std::string log = j.value("render_log", "");
-      if (const std::size_t at = log.rfind("%a"); at != std::string::npos)
-        log.replace(at, 2, std::to_string(f - ch.first));
-      const std::optional<int> code = logged_exit(log);
-      if (code && *code != 0) r = {f, FrameStatus::Failed, render_rerun(ch, f)};
-    } else {
-      // The chain after a failed tracking job was cancelled: the whole farm command goes again.
-      const std::optional<int> code = logged_exit(j.value("track_log", ""));
-      if (code && *code != 0)
-        r = {f, FrameStatus::Failed,
-             "cd " + shell_quote(record.value("cwd", ".")) + " && " +
-                 shell_words(record["command"].get<std::vector<std::string>>())};
-    }
-  }
-  return r;
-}
-
 void run_status(const StatusCli& c) {
   apply_global_options();
-  const json record = read_farm_record(c.dir, c.name);
-  const std::string name = !c.name.empty() || record.is_null() ? c.name : record["name"].get<std::string>();
-  BakeManifest m;
-  if (!record.is_null() && !fs::is_regular_file(bake_manifest_path(c.dir, name))) {
-    // Submitted, but the first tracking job has not written the manifest yet.
-    m.name = name;
-    m.dir = fs::absolute(c.dir).lexically_normal().string();
-    for (int f = record["first"].get<int>(); f <= record["last"].get<int>(); ++f) m.frames.push_back(f);
-  } else {
-    m = read_bake_manifest(c.dir, name);
-  }
-
-  std::vector<FrameReport> frames;
-  std::map<FrameStatus, int> counts;
-  for (int f : m.frames) {
-    frames.push_back(frame_report(m, record, f));
-    ++counts[frames.back().status];
-  }
+  const FarmStatus s = farm_status(c.dir, c.name);
+  const BakeManifest& m = s.manifest;
+  const std::vector<FarmFrameReport>& frames = s.frames;
+  auto count = [&](FrameStatus st) { return s.counts.count(st) ? s.counts.at(st) : 0; };
   if (c.json) {
     json list = json::array();
-    for (const FrameReport& r : frames) {
-      json j = {{"frame", r.frame}, {"status", status_name(r.status)}};
+    for (const FarmFrameReport& r : frames) {
+      json j = {{"frame", r.frame}, {"status", frame_status_name(r.status)}};
       if (!r.rerun.empty()) j["rerun"] = r.rerun;
       list.push_back(j);
     }
@@ -590,10 +98,10 @@ void run_status(const StatusCli& c) {
                       {"name", m.name},
                       {"frames", list},
                       {"total", frames.size()},
-                      {"rendered", counts[FrameStatus::Rendered]},
-                      {"tracked", counts[FrameStatus::Tracked]},
-                      {"failed", counts[FrameStatus::Failed]},
-                      {"pending", counts[FrameStatus::Pending]}};
+                      {"rendered", count(FrameStatus::Rendered)},
+                      {"tracked", count(FrameStatus::Tracked)},
+                      {"failed", count(FrameStatus::Failed)},
+                      {"pending", count(FrameStatus::Pending)}};
     fmt::print("{}\n", out.dump(2, ' ', false, json::error_handler_t::replace));
     return;
   }
@@ -607,13 +115,13 @@ void run_status(const StatusCli& c) {
       ++j;
     const std::string span =
         j - i == 1 ? std::to_string(frames[i].frame) : fmt::format("{}-{}", frames[i].frame, frames[j - 1].frame);
-    fmt::print("  {:<9} {}{}\n", status_name(frames[i].status), span,
+    fmt::print("  {:<9} {}{}\n", frame_status_name(frames[i].status), span,
                frames[i].rerun.empty() ? "" : "   re-run: " + frames[i].rerun);
     i = j;
   }
   fmt::print("{} frames: {} rendered, {} tracked (not yet rendered), {} failed, {} pending\n", frames.size(),
-             counts[FrameStatus::Rendered], counts[FrameStatus::Tracked], counts[FrameStatus::Failed],
-             counts[FrameStatus::Pending]);
+             count(FrameStatus::Rendered), count(FrameStatus::Tracked), count(FrameStatus::Failed),
+             count(FrameStatus::Pending));
 }
 
 }  // namespace

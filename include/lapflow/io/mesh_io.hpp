@@ -124,5 +124,8 @@ class FramePattern {
 /// else InputError naming the first missing file), else all found on disk
 /// (InputError when none).
 std::vector<int> resolve_frames(const FramePattern& pattern, const std::optional<FrameRange>& range);
+/// The name of a sequence's outputs: `dam_break` for
+/// `/data/dam_break.%04d.ply` ("lapflow" when nothing is left).
+std::string default_output_name(const std::string& mesh_pattern);
 
 }  // namespace lapflow
