@@ -151,6 +151,30 @@ PreviewCamera frame_camera(const Box3& box, const Vec3& up, double aspect, doubl
   return frame_camera(corners, up, aspect, azimuth, elevation, fov);
 }
 
+std::vector<PreviewCamera> preview_cameras(const std::vector<Vec3>& points, const PreviewFraming& f,
+                                           int pictures) {
+  std::vector<PreviewCamera> cameras(static_cast<std::size_t>(std::max(pictures, 0)));
+  double distance = 0;
+  for (int pass = 0; pass < (f.turntable && !f.fixed ? 2 : 1); ++pass)
+    for (int i = 0; i < pictures; ++i) {
+      PreviewCamera& cam = cameras[std::size_t(i)];
+      if (f.fixed) {
+        cam = *f.fixed;
+        if (f.turntable) {  // orbit the given eye about the target
+          const double a = 2 * std::numbers::pi * i / pictures;
+          const Vec3 q = cam.eye - cam.target, up = normalized(cam.up);
+          const Vec3 along = up * dot(q, up), flat = q - along, side = cross(up, flat);
+          cam.eye = cam.target + along + flat * std::cos(a) + side * std::sin(a);
+        }
+        continue;
+      }
+      const double az = f.turntable ? f.azimuth + 360.0 * i / pictures : f.azimuth;
+      cam = frame_camera(points, f.up, f.aspect, az, f.elevation, f.fov, distance);
+      if (pass == 0) distance = std::max(distance, norm(cam.eye - cam.target));
+    }
+  return cameras;
+}
+
 Image side_by_side(const std::vector<Image>& panels, int gap, const Vec3& gap_color) {
   if (panels.empty()) throw std::invalid_argument("side_by_side: no panels");
   const int w = panels[0].width, h = panels[0].height, ch = panels[0].channels;

@@ -334,4 +334,36 @@ TEST(PreviewCommand, MissingFilesAreErrorsNamingThem) {
 }
 
 }  // namespace
+
+TEST(PreviewCameras, ATurntableKeepsItsLargestDistanceAndAFixedEyeOrbitsItsTarget) {
+  // A long, flat slab: framed from each side, the distance needed differs.
+  std::vector<Vec3> points;
+  for (int k = 0; k < 8; ++k) points.push_back({(k & 1) ? 2.0 : -2.0, (k & 2) ? 0.5 : -0.5, (k & 4) ? 0.2 : 0.0});
+  PreviewFraming f;
+  f.turntable = true;
+  const std::vector<PreviewCamera> spin = preview_cameras(points, f, 8);
+  ASSERT_EQ(spin.size(), 8u);
+  double largest = 0;
+  for (int i = 0; i < 8; ++i) {
+    const PreviewCamera alone = frame_camera(points, f.up, f.aspect, f.azimuth + 45.0 * i, f.elevation, f.fov);
+    largest = std::max(largest, norm(alone.eye - alone.target));
+  }
+  for (const PreviewCamera& c : spin) EXPECT_NEAR(norm(c.eye - c.target), largest, 1e-9 * largest);
+
+  PreviewCamera eye;
+  eye.eye = {2, 0, 1};
+  eye.target = {0, 0, 0};
+  f.fixed = eye;
+  const std::vector<PreviewCamera> orbit = preview_cameras(points, f, 4);
+  ASSERT_EQ(orbit.size(), 4u);
+  for (const PreviewCamera& c : orbit) {
+    EXPECT_NEAR(norm(c.eye - c.target), std::sqrt(5.0), 1e-12);
+    EXPECT_NEAR(c.eye.z, 1.0, 1e-12);  // around the up axis
+  }
+  EXPECT_NEAR(orbit[2].eye.x, -2.0, 1e-12);  // half way round
+  EXPECT_NEAR(orbit[1].eye.y, 2.0, 1e-12);   // a quarter turn, counter-clockwise about +z
+  f.turntable = false;
+  for (const PreviewCamera& c : preview_cameras(points, f, 3)) EXPECT_EQ(c.eye.x, 2.0);
+}
+
 }  // namespace lapflow

@@ -2,7 +2,6 @@
 // bake or several side by side.
 #include <ctime>
 #include <filesystem>
-#include <numbers>
 #include <set>
 #include <sstream>
 
@@ -137,27 +136,13 @@ void run_preview(PreviewCli& c) {
   const int pictures = spin_one ? c.views : int(frames.size());
   const std::string kind = spin_one ? "turntable" : (comparing ? "compare" : "preview");
 
-  // The cameras: framed from every vertex of the sequence; a turntable keeps
-  // the largest distance of its views so the liquid does not breathe.
-  std::vector<PreviewCamera> cameras(static_cast<std::size_t>(pictures));
-  double distance = 0;
-  for (int pass = 0; pass < (c.turntable && !fixed ? 2 : 1); ++pass)
-    for (int i = 0; i < pictures; ++i) {
-      PreviewCamera& cam = cameras[std::size_t(i)];
-      if (fixed) {
-        cam = *fixed;
-        if (c.turntable) {  // orbit the given eye about the target
-          const double a = 2 * std::numbers::pi * i / pictures;
-          const Vec3 q = cam.eye - cam.target, up = normalized(cam.up);
-          const Vec3 along = up * dot(q, up), flat = q - along, side = cross(up, flat);
-          cam.eye = cam.target + along + flat * std::cos(a) + side * std::sin(a);
-        }
-        continue;
-      }
-      const double az = c.turntable ? c.azimuth + 360.0 * i / pictures : c.azimuth;
-      cam = frame_camera(extent.points, o.look.up, aspect, az, c.elevation, c.fov, distance);
-      if (pass == 0) distance = std::max(distance, norm(cam.eye - cam.target));
-    }
+  PreviewFraming framing;
+  framing.fixed = fixed;
+  framing.turntable = c.turntable;
+  framing.azimuth = c.azimuth, framing.elevation = c.elevation, framing.fov = c.fov;
+  framing.up = o.look.up;
+  framing.aspect = aspect;
+  const std::vector<PreviewCamera> cameras = preview_cameras(extent.points, framing, pictures);
   const std::string out_dir = c.out.empty() ? (fs::path(main.dir) / "preview").string() : c.out;
   std::error_code ec;
   fs::create_directories(out_dir, ec);

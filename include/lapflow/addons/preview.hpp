@@ -104,6 +104,23 @@ PreviewCamera frame_camera(const std::vector<Vec3>& points, const Vec3& up, doub
 PreviewCamera frame_camera(const Box3& box, const Vec3& up, double aspect, double azimuth = -35,
                            double elevation = 28, double fov = 30);
 
+/// How the pictures of a preview are framed (`lapflow preview`).
+struct PreviewFraming {
+  /// --camera: every picture from this eye and target; a turntable orbits
+  /// the eye about the target, around `up`.
+  std::optional<PreviewCamera> fixed;
+  bool turntable = false;  ///< `pictures` views around the liquid (azimuth + 360 i / pictures)
+  double azimuth = -35, elevation = 28, fov = 30;  ///< degrees, without `fixed`
+  Vec3 up{0, 0, 1};
+  double aspect = 16.0 / 9;  ///< width / height
+};
+/// The camera of each of `pictures` pictures, framed from `points` (every
+/// vertex of the sequence, PreviewExtent::points) unless fixed: one camera
+/// for a sequence, and for a turntable the largest distance of its views,
+/// so that the liquid does not breathe.
+std::vector<PreviewCamera> preview_cameras(const std::vector<Vec3>& points, const PreviewFraming& framing,
+                                           int pictures);
+
 /// Renders one frame. `bounds` is the bounding box of the whole sequence: it
 /// places the ground plane and sizes the shadow and fade distances, so that
 /// they do not change from frame to frame. The result is linear RGB.
