@@ -1,23 +1,19 @@
 // `lapflow patches`: seeds patches on the first frame, advects them through
 // the sequence and writes one PLY of patches per frame (patch_id, rest uv,
-// weight), to look at how patches ride the flow in Houdini or Blender. No
-// hole filling here (the bake does it), so patches only die.
+// weight), to look at how patches ride the flow in Houdini or Blender. The
+// frame loop is the library's (dump_patches, bake/patch_dump.hpp).
 #include <algorithm>
-#include <cmath>
 #include <filesystem>
-#include <map>
 #include <memory>
 #include <optional>
 
 #include "cli_common.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/bake/bake.hpp"
-#include "lapflow/bake/budget.hpp"
+#include "lapflow/bake/patch_dump.hpp"
 #include "lapflow/bake/frame.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/patches/patches.hpp"
-#include "lapflow/surface/surface_query.hpp"
-#include "lapflow/surface/velocity.hpp"
 
 namespace lapflow::cli {
 namespace {
@@ -31,109 +27,45 @@ struct PatchesCommand {
   Remesher remesher = PatchOptions{}.remesher;
 };
 
-struct Counts {
-  std::size_t patches = 0, vertices = 0, triangles = 0;
-  double median_delta = 0, mean_weight = 0;
-  double eroded = 0;  ///< fraction of triangles with delta >= delta_max or folded
-};
-
-Counts count(const PatchSet& set, double delta_max) {
-  Counts c;
-  c.patches = set.patches.size();
-  double wsum = 0;
-  std::vector<float> deltas;
-  std::size_t over = 0;
-  for (const Patch& p : set.patches) {
-    c.vertices += p.positions.size();
-    c.triangles += p.triangles.size();
-    deltas.insert(deltas.end(), p.triangle_delta.begin(), p.triangle_delta.end());
-    for (float d : p.triangle_delta) over += !(d < delta_max);
-    for (float w : p.weight) wsum += w;
-  }
-  if (!deltas.empty()) {
-    std::nth_element(deltas.begin(), deltas.begin() + deltas.size() / 2, deltas.end());
-    c.median_delta = deltas[deltas.size() / 2];
-  }
-  c.eroded = c.triangles ? double(over) / double(c.triangles) : 0;
-  c.mean_weight = c.vertices ? wsum / double(c.vertices) : 0;
-  return c;
-}
-
 void run_patches(const PatchesCommand& c) {
   apply_global_options();
-  if (!(c.radius > 0)) throw UsageError("--radius must be positive (world units)");
-  if (!(c.fps > 0)) throw UsageError("--fps must be positive");
-  if (!(c.spacing > 0)) throw UsageError("--spacing must be positive");
-  if (!(c.delta_max > 1)) throw UsageError("--delta-max must be greater than 1");
-  Vec3 align_direction;
-  const bool align = parse_orientation(c.orientation, align_direction);
-  const FramePattern meshes(c.source.mesh_pattern);
+  PatchDumpOptions o;
+  o.source = c.source;
   std::optional<FrameRange> range;
   if (!c.frames.empty()) range = parse_frame_range(c.frames);
-  const std::vector<int> frames = resolve_frames(meshes, range);
-  const std::string name = c.name.empty() ? default_output_name(c.source.mesh_pattern) : c.name;
-  std::error_code ec;
-  std::filesystem::create_directories(c.out_dir, ec);
-  if (ec) throw OutputError(c.out_dir + ": cannot create the output folder: " + ec.message());
+  o.frames = resolve_frames(FramePattern(c.source.mesh_pattern), range);
+  o.out_dir = c.out_dir;
+  o.name = c.name.empty() ? default_output_name(c.source.mesh_pattern) : c.name;
+  o.patch.radius = c.radius;
+  o.patch.remesh = c.remesh;
+  o.patch.remesher = c.remesher;
+  o.patch.seed = globals().seed;
+  o.patch.align = parse_orientation(c.orientation, o.patch.align_direction);
+  o.seeding.spacing = c.spacing;
+  o.weights.delta_max = c.delta_max;
+  o.fps = c.fps;
+  o.max_memory = c.max_memory;
 
-  PatchOptions po;
-  po.radius = c.radius;
-  po.remesh = c.remesh;
-  po.remesher = c.remesher;
-  po.seed = globals().seed;
-  po.align = align;
-  po.align_direction = align_direction;
-  SeedOptions so;
-  so.spacing = c.spacing;
-  WeightOptions wo;
-  wo.delta_max = c.delta_max;
-  AdvectOptions ao;
-
-  auto out_path = [&](int frame) { return (std::filesystem::path(c.out_dir) / fmt::format("{}.patches.{:04d}.ply", name, frame)).string(); };
-  PatchSet set;
-  Progress progress("patches", frames.size());
-  std::unique_ptr<Frame> prev = load_frame(c.source, frames.front());
-  {
-    // The bake's memory model, patches and meshes only (no atlas, no
-    // exemplar), before the first seeding: a radius in the wrong unit is
-    // refused, never an allocation that fails.
-    BakeOptions budget;
-    budget.patch = po;
-    budget.seeding = so;
-    budget.atlas.resolution = 0;
-    budget.max_memory = c.max_memory;
-    BakeInputSizes sizes;
-    sizes.first_mesh = prev->path;
-    sizes.area = surface_area(prev->mesh);
-    sizes.triangles = prev->mesh.triangle_count();
-    sizes.vertices = prev->mesh.vertex_count();
-    check_bake_budget(budget, sizes);
-  }
-  seed_patches(*prev->surface, prev->number, po, so, wo, set);
-  write_patches_ply(out_path(prev->number), set);
-  const std::size_t seeded = set.patches.size();
-  Counts n = count(set, wo.delta_max);
-  progress.step(fmt::format("frame {}: seeded {} patches, {} vertices, median delta {:.3f}", prev->number, n.patches,
-                            n.vertices, n.median_delta));
-  std::size_t removed_total = 0;
-  for (std::size_t i = 1; i < frames.size(); ++i) {
-    std::unique_ptr<Frame> next = load_frame(c.source, frames[i]);
-    ao.dt = double(next->number - prev->number) / c.fps;
-    const AdvectStats st = advect_patches(*next->surface, prev->velocity, next->velocity, po, ao, set);
-    update_weights(next->mesh, po.radius, wo, set);
-    removed_total += st.vertices_removed;
-    write_patches_ply(out_path(next->number), set);
-    n = count(set, wo.delta_max);
+  Progress progress("patches", o.frames.size());
+  std::size_t seeded = 0, removed_total = 0, alive = 0;
+  dump_patches(o, [&](const PatchDumpFrame& f) {
+    alive = f.patches;
+    if (f.seeded) {
+      seeded = f.patches;
+      progress.step(fmt::format("frame {}: seeded {} patches, {} vertices, median delta {:.3f}", f.frame, f.patches,
+                                f.vertices, f.median_delta));
+      return;
+    }
+    removed_total += f.advect.vertices_removed;
     progress.step(fmt::format("frame {}: {} patches alive ({} died), {} vertices ({} removed), median delta {:.3f}, "
                               "{:.1f}% triangles over delta-max, mean w {:.3f}",
-                              next->number, n.patches, st.patches_removed, n.vertices, st.vertices_removed,
-                              n.median_delta, 100 * n.eroded, n.mean_weight));
-    prev = std::move(next);
-  }
+                              f.frame, f.patches, f.advect.patches_removed, f.vertices, f.advect.vertices_removed,
+                              f.median_delta, 100 * f.eroded, f.mean_weight));
+  });
   progress.finish();
   info("patches: {} seeded on frame {}, {} alive after frame {}, {} vertices removed in all; wrote {}", seeded,
-       frames.front(), set.patches.size(), frames.back(), removed_total,
-       (std::filesystem::path(c.out_dir) / (name + ".patches.####.ply")).string());
+       o.frames.front(), alive, o.frames.back(), removed_total,
+       (std::filesystem::path(c.out_dir) / (o.name + ".patches.####.ply")).string());
 }
 
 }  // namespace
