@@ -26,7 +26,6 @@ using nlohmann::json;
 
 std::string FarmPlan::farm_dir() const { return (fs::path(dir) / "farm").string(); }
 std::string FarmPlan::log_dir() const { return (fs::path(dir) / "farm" / "logs").string(); }
-std::string FarmPlan::record_path() const { return (fs::path(dir) / "farm" / "farm.json").string(); }
 
 namespace {
 
@@ -111,6 +110,8 @@ std::string render_log(const FarmPlan& p, const FarmChunk& c, const std::string&
 }
 
 }  // namespace
+
+std::string FarmPlan::record_path() const { return (fs::path(farm_dir()) / kFarmRecord).string(); }
 
 /// `s` as one shell word.
 std::string shell_quote(const std::string& s) {
@@ -278,7 +279,7 @@ json plan_json(const FarmPlan& p, bool submitted) {
 }  // namespace
 
 void write_farm_record(const FarmPlan& p, bool submitted) {
-  write_text_atomically((fs::path(p.farm_dir()) / kFarmRecord).string(),
+  write_text_atomically(p.record_path(),
                         plan_json(p, submitted).dump(2, ' ', false, json::error_handler_t::replace) + "\n");
 }
 
