@@ -53,9 +53,10 @@ constexpr double kSlabCx = 0.5, kSlabCy = 0.75, kSlabRadius = 0.15;
 constexpr double kSlabZ = 0.5, kSlabHalfThickness = 0.02;
 
 // RK4 step of the backward trace in pseudo-time (seconds): a sixteenth of a
-// metre at the peak speed. The field's wavelength is 1 m; measured against a
-// trace 8x finer, the 1/128 m surface moves by 0.02 voxel (vortex) and 0.5
-// voxel (slab, whose spiral tail is squeezed hard), at an eighth of the cost.
+// metre at the peak speed. The field's wavelength is 1 m; against a much
+// finer trace the surface moves by a fraction of a voxel (most on the slab,
+// whose spiral tail is squeezed hard), at a fraction of the cost
+// (docs/performance.md, "Figures from code comments").
 double trace_step(DemoCase scene) { return 1.0 / (16 * (scene == DemoCase::Vortex ? 2.0 : kSlabSpeed)); }
 
 double pseudo_time(double t, double period) { return period / kPi * std::sin(kPi * t / period); }
@@ -309,9 +310,10 @@ TriMesh demo_frame(const DemoOptions& options, int frame) {
 }
 
 double demo_voxel_size_for(DemoCase scene, double triangles) {
-  // Frame-1 triangles ~ density * area / h^2, measured with volumeToMesh at
-  // h = 1/128: 3.0 on the sphere; 2.1 on the slab, whose 4 cm rim is only a
-  // few voxels high. Later frames have more area (up to 2.4x on the vortex).
+  // Frame-1 triangles ~ density * area / h^2, the density fitted to
+  // volumeToMesh at h = 1/128: 3.0 on the sphere; 2.1 on the slab, whose 4 cm
+  // rim is only a few voxels high. Later frames have more area
+  // (docs/demo_scene.md, "Numbers").
   const double area = scene == DemoCase::Vortex
                           ? 4 * kPi * kSphereRadius * kSphereRadius
                           : 2 * kPi * kSlabRadius * kSlabRadius + 2 * kPi * kSlabRadius * 2 * kSlabHalfThickness;

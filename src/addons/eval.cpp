@@ -212,9 +212,9 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
   // of the input mesh) or its VDB grids.
   const TriMesh& mesh = f.uv.mesh;
   FrameSource source;
-  source.mesh_pattern = m.mesh_pattern;
-  source.velocity_vdb_pattern = m.velocity_vdb_pattern;
-  source.velocity_grid = m.velocity_grid;
+  source.mesh_pattern = m.options.mesh_pattern;
+  source.velocity_vdb_pattern = m.options.velocity_vdb_pattern;
+  source.velocity_grid = m.options.velocity_grid;
   source.allow_zero_velocity = true;  // eval reads what the bake accepted; no velocity is zero velocity
   source.units_ok = true;             // the same: the bake decided (--units-ok)
   FrameInput in = read_frame_input(source, frame);
@@ -1014,10 +1014,10 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
                          const std::function<void(const FrameMetrics&)>& on_frame) {
   const BakeManifest m = read_bake_manifest(dir);
   const std::string folder = m.dir.empty() ? dir : m.dir;
-  if (!m.aov)
+  if (!m.options.aov)
     throw InputError(folder, "the bake has no AOVs (NAME.aov.N.exr): bake again with --aov to evaluate it");
-  if (!(m.radius > 0)) throw InputError(bake_manifest_path(folder, m.name), "radius must be positive");
-  if (!(m.fps > 0)) throw InputError(bake_manifest_path(folder, m.name), "fps must be positive");
+  if (!(m.options.patch.radius > 0)) throw InputError(bake_manifest_path(folder, m.name), "radius must be positive");
+  if (!(m.options.fps > 0)) throw InputError(bake_manifest_path(folder, m.name), "fps must be positive");
   std::vector<int> frames;
   for (int f : m.frames)
     if (!o.frames || (f >= o.frames->first && f <= o.frames->last)) frames.push_back(f);
@@ -1029,12 +1029,12 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   EvalReport report;
   report.dir = folder;
   report.name = m.name;
-  report.mode = m.mode;
-  report.exemplar = o.exemplar.empty() ? m.exemplar_color : o.exemplar;
-  report.resolution = m.resolution;
-  report.radius = m.radius;
-  report.fps = m.fps;
-  report.rest_speed = o.min_speed ? *o.min_speed : m.min_speed;
+  report.mode = raster_mode_name(m.options.raster.mode);
+  report.exemplar = o.exemplar.empty() ? m.options.exemplar_color : o.exemplar;
+  report.resolution = m.options.atlas.resolution;
+  report.radius = m.options.patch.radius;
+  report.fps = m.options.fps;
+  report.rest_speed = o.min_speed ? *o.min_speed : m.options.min_speed;
   if (report.rest_speed < 0) throw UsageError("--min-speed must not be negative");
   ExemplarAtScale exemplar(read_image(report.exemplar));
   report.exemplar_luminance_std = exemplar_stats(exemplar.original()).luminance_std;
@@ -1052,7 +1052,7 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
     auto cur = std::make_unique<FrameData>(load_baked_frame(m, frame));
     FrameMetrics fm;
     fm.frame = frame;
-    frame_metrics(*cur, exemplar, m.radius, o, fm);
+    frame_metrics(*cur, exemplar, m.options.patch.radius, o, fm);
     if (const auto it = population.find(frame); it != population.end()) {
       const Population& pop = it->second;
       fm.born = pop.born, fm.died = pop.died;
@@ -1063,9 +1063,9 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
     if (prev && std::isfinite(prev->texel_world) && !prev->uv.mesh.empty()) {
       prev->query = std::make_unique<SurfaceQuery>(prev->uv.mesh);
       PairSettings s;
-      s.dt = double(frame - prev->frame) / m.fps;
-      s.radius = m.radius;
-      s.bake_min_speed = m.min_speed;
+      s.dt = double(frame - prev->frame) / m.options.fps;
+      s.radius = m.options.patch.radius;
+      s.bake_min_speed = m.options.min_speed;
       s.rest_speed = report.rest_speed;
       pair_metrics(*prev, *cur, s, fm, o.maps_dir.empty() ? nullptr : &kinds);
       if (!o.maps_dir.empty()) report.maps.push_back(write_popping_map(m, *cur, kinds, o.maps_dir));

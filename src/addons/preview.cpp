@@ -55,7 +55,7 @@ PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
       h = std::move(one);
     }
   }
-  return make_preview_frame(std::move(mesh), std::move(c), std::move(h), bake.radius);
+  return make_preview_frame(std::move(mesh), std::move(c), std::move(h), bake.options.patch.radius);
 }
 
 PreviewExtent preview_extent(const BakeManifest& bake, const std::vector<int>& frames, std::size_t max_points) {

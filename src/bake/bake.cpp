@@ -357,7 +357,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
   BakeManifest manifest = make_bake_manifest(o, frames);
-  manifest.settings["feature_digest"] = exemplar_feature_digest(exemplar.feature);
+  manifest.feature_digest = exemplar_feature_digest(exemplar.feature);
   ResumePoint resume;
   if (o.resume) resume = find_resume_point(o, manifest);
   remove_states_after(o, manifest, resume.index);
@@ -399,8 +399,9 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       record_frame_stats(cur, tracked, patches, st, !o.track_only);
       // The next frame reads only this one's number, mesh and velocity: its
       // raster buffers and tracking atlas go now, not when the next frame
-      // replaces it as `prev` (about 570 MB at 6144² that the next frame's
-      // own buffers would otherwise come on top of).
+      // replaces it as `prev` (hundreds of megabytes at production
+      // resolutions that the next frame's own buffers would otherwise come on
+      // top of; docs/performance.md, "Memory and large blocks").
       cur.raster = RasterBuffers{};
       cur.tracking_atlas = SurfaceAtlas{};
       stop_if_asked(writer);

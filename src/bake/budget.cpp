@@ -36,16 +36,16 @@ constexpr double kAovTexelBytes = 16;
 constexpr double kChartTexelBytes = 2 * 8 + 8 + 1 + 4;
 // Blend mode's fixed-point sums (5 x 8) and best weights (8).
 constexpr double kBlendChartTexelBytes = 48;
-// Chart texels / atlas texels: since issue 15's denser packing the shared
-// scenes reach 0.67-0.83 at 4096^2 and thousands of droplet charts 0.86
-// (docs/atlas.md, "Denser atlases"); provision for the high end.
+// Chart texels / atlas texels: what the packer reaches on the shared scenes
+// and on thousands of droplet charts is in docs/atlas.md, "Denser atlases";
+// provision for the high end.
 constexpr double kUtilization = 0.85;
 // ---- the fluid meshes --------------------------------------------------------
 // Per fluid triangle of a frame in flight: the mesh (positions, velocities,
 // triangles), Embree's BVH, the velocity band, the atlas's per-triangle
 // tables (charts, LSCM, corner uv) and the raster's (normals, centroids,
-// vertex-triangle lists, seams). Measured: splash against dam_break at the
-// same resolution, about 1000 bytes per triangle for the three frames.
+// vertex-triangle lists, seams). Checked by splash against dam_break at the
+// same resolution (docs/robustness.md, "The measurement that checks it").
 constexpr double kTriangleBytes = 400;
 // Frames alive at once: the previous one (velocity), the current one and the
 // next one being read ahead.
@@ -57,14 +57,15 @@ constexpr double kFramesInFlight = 3;
 constexpr double kPatchVertexRawBytes = 53, kPatchTriangleRawBytes = 20;
 constexpr double kPatchVertexBytes = 1.5 * kPatchVertexRawBytes, kPatchTriangleBytes = 1.5 * kPatchTriangleRawBytes;
 // Per patch: its struct, the held-cell grid (2 KiB) and the raster's
-// per-patch tables. With the lattice's 204 vertices a patch comes to 32 KiB;
-// measured: 33 KiB per patch alive (dam_break, radius 0.01 against the default).
+// per-patch tables. With the lattice's 204 vertices a patch comes to 32 KiB,
+// which a small radius against the default checks (docs/robustness.md, "The
+// measurement that checks it").
 constexpr double kPatchFixedBytes = 4000;
 // NAME.state.N.bin (src/bake/state.cpp), encoded in memory each frame and
 // held until written: per patch a header of about 100 bytes and its held
 // cells (2 KiB), and the vertex and triangle arrays as they are (the raw
 // bytes above, without the vectors' slack). The byte string grows by
-// doubling: provision 2x. (About 21 KB a patch alive on splash.)
+// doubling: provision 2x.
 constexpr double kStatePatchBytes = 100 + 2048;
 constexpr double kStateSlack = 2;
 // A lattice patch has about 5.67 / e^2 vertices for a remesh edge e r (an
@@ -72,9 +73,9 @@ constexpr double kStateSlack = 2;
 // triangles.
 constexpr double kLatticeVertexFactor = 5.67;
 // Population over the patches that cover the surface once (area / pi r^2):
-// a Poisson seeding at spacing r holds 2.0x that (945 on dam_break's first
-// frame for 477), and the population grows up to 3.7x a fresh seeding
-// without the temporal options (channel, docs/temporal.md): 8x.
+// a Poisson seeding at spacing r holds about 2x that, and the population
+// grows to under 4x a fresh seeding without the temporal options (channel,
+// docs/temporal.md): 2 x 4 = 8x (docs/robustness.md, "The model").
 constexpr double kPopulationFactor = 8;
 // Poisson-disk candidates: 40 per area / d^2, 32 bytes each, twice (the
 // first frame's seeding and the read-ahead's fresh-seeding count).

@@ -2,6 +2,7 @@
 #include "lapflow/bake/manifest.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <zlib.h>
 
 #include <cstdio>
@@ -13,6 +14,7 @@
 #include <string_view>
 #include <utility>
 
+#include "lapflow/bake/options.hpp"
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/errors.hpp"
 #include "core/json_number.hpp"
@@ -96,61 +98,11 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   BakeManifest m;
   m.name = o.name;
   m.dir = absolute_or_empty(o.out_dir);
-  m.mesh_pattern = absolute_or_empty(o.mesh_pattern);
-  m.velocity_vdb_pattern = absolute_or_empty(o.velocity_vdb_pattern);
-  m.velocity_grid = o.velocity_grid;
   m.frames = frames;
-  m.fps = o.fps;
-  m.min_speed = o.min_speed;
-  m.allow_zero_velocity = o.allow_zero_velocity;
-  m.exemplar_color = absolute_or_empty(o.exemplar_color);
-  m.exemplar_feature = absolute_or_empty(o.exemplar_feature);
-  m.exemplar_displacement = absolute_or_empty(o.exemplar_displacement);
-  m.mode = raster_mode_name(o.raster.mode);
-  m.radius = o.patch.radius;
-  m.epsilon = o.raster.epsilon;
-  m.hold = o.raster.hold;
-  m.hold_margin = o.raster.hold_margin;
-  m.small_hole = o.raster.small_hole;
-  m.rest_hole = o.raster.rest_hole;
-  m.merge = o.raster.merge;
-  m.delta_max = o.weights.delta_max;
-  m.resolution = o.atlas.resolution;
-  m.seed = o.seed;
-  m.aov = o.aov;
-  m.dump_patches = o.dump_patches;
-  // fmt's shortest representation reads back to the same double.
-  const auto text = [](auto v) { return fmt::format("{}", v); };
-  std::map<std::string, std::string>& s = m.settings;
-  s["velocity_band"] = text(o.velocity_band);
-  s["velocity_voxel"] = text(o.velocity_voxel);
-  s["spacing"] = text(o.seeding.spacing);
-  s["remesh"] = text(o.patch.remesh);
-  s["remesher"] = text(int(o.patch.remesher));
-  s["remesh_edge"] = text(o.patch.remesh_edge);
-  s["anticipate"] = text(o.patch.anticipate);
-  s["anticipate_horizon"] = text(o.patch.anticipate_horizon);
-  s["align"] = o.patch.align ? fmt::format("{},{},{}", o.patch.align_direction.x, o.patch.align_direction.y,
-                                           o.patch.align_direction.z)
-                             : "random";
-  s["advect_max_step_fraction"] = text(o.advect.max_step_fraction);
-  s["advect_max_turn"] = text(o.advect.max_turn);
-  s["advect_max_projection"] = text(o.advect.max_projection);
-  s["advect_through_flow"] = text(o.advect.through_flow);
-  s["advect_run_off"] = text(o.advect.run_off);
-  s["center_radius"] = text(o.weights.center_radius);
-  s["gutter"] = text(o.atlas.gutter);
-  s["max_stretch"] = text(o.atlas.max_stretch);
-  s["fill_holes"] = text(o.raster.fill_holes);
-  s["retire"] = text(o.raster.retire);
-  s["rest_bound"] = text(o.raster.rest_bound);
-  s["mipmap"] = text(o.raster.mipmap);
-  s["trilinear"] = text(o.raster.trilinear);
-  s["dilate"] = text(o.raster.dilate);
-  s["max_hole_patches"] = text(o.raster.max_hole_patches);
-  s["exr_type"] = text(int(o.exr.type));
-  s["exr_compression"] = text(int(o.exr.compression));
-  s["track_texel"] = text(o.track_texel);
+  m.options = o;
+  for (const BakeOption& option : bake_option_table())
+    if (option.kind == OptionKind::Path && !option.manifest_key.empty())
+      option.set(m.options, absolute_or_empty(option.get(o)));
   return m;
 }
 
@@ -170,33 +122,48 @@ std::string exemplar_feature_digest(const Image& feature) {
 
 namespace {
 
+/// The manifest's text of `option` in `o`.
+std::string manifest_text(const BakeOption& option, const BakeOptions& o) {
+  return option.manifest_get ? option.manifest_get(o) : option.get(o);
+}
+
+/// "settings/spacing" -> ("settings", "spacing"); "radius" -> ("", "radius").
+std::pair<std::string, std::string> split_key(const std::string& key) {
+  const std::size_t slash = key.find('/');
+  if (slash == std::string::npos) return {"", key};
+  return {key.substr(0, slash), key.substr(slash + 1)};
+}
+
+/// The JSON value of `option` at the top of the manifest (or nested in an
+/// object other than settings): typed by its kind. Settings hold text.
+nlohmann::json typed_value(const BakeOption& option, const std::string& text) {
+  switch (option.kind) {
+    case OptionKind::Number: return std::stod(text);
+    case OptionKind::Integer:
+      if (!text.empty() && text[0] == '-') return std::stoll(text);
+      return std::stoull(text);
+    case OptionKind::Flag: return text == "true";
+    default: return text;
+  }
+}
+
 nlohmann::json manifest_json(const BakeManifest& m) {
-  return {{"lapflow_bake", m.version},
-                            {"name", m.name},
-                            {"mesh", m.mesh_pattern},
-                            {"velocity_vdb", m.velocity_vdb_pattern},
-                            {"velocity_grid", m.velocity_grid},
-                            {"frames", m.frames},
-                            {"fps", m.fps},
-                            {"min_speed", m.min_speed},
-                            {"allow_zero_velocity", m.allow_zero_velocity},
-                            {"exemplar", {{"color", m.exemplar_color},
-                                          {"feature", m.exemplar_feature},
-                                          {"displacement", m.exemplar_displacement}}},
-                            {"mode", m.mode},
-                            {"radius", m.radius},
-                            {"epsilon", m.epsilon},
-                            {"hold", m.hold},
-                            {"hold_margin", m.hold_margin},
-                            {"small_hole", m.small_hole},
-                            {"rest_hole", m.rest_hole},
-                            {"merge", m.merge},
-                            {"delta_max", m.delta_max},
-                            {"resolution", m.resolution},
-                            {"seed", m.seed},
-                            {"aov", m.aov},
-                            {"dump_patches", m.dump_patches},
-                            {"settings", m.settings}};
+  nlohmann::json j = {{"lapflow_bake", m.version}, {"name", m.name}, {"frames", m.frames}};
+  nlohmann::json settings = nlohmann::json::object();
+  for (const BakeOption& option : bake_option_table()) {
+    if (option.manifest_key.empty()) continue;
+    const std::string text = manifest_text(option, m.options);
+    const auto [parent, key] = split_key(option.manifest_key);
+    if (parent == "settings")
+      settings[key] = text;
+    else if (parent.empty())
+      j[key] = typed_value(option, text);
+    else
+      j[parent][key] = typed_value(option, text);
+  }
+  if (!m.feature_digest.empty()) settings["feature_digest"] = m.feature_digest;
+  j["settings"] = std::move(settings);
+  return j;
 }
 
 /// The manifest file at `path` as JSON; throws InputError naming it.
@@ -219,15 +186,12 @@ void write_bake_manifest(const BakeManifest& m, const std::string& path) {
 namespace {
 
 /// The flattened keys of the options that change only the output images
-/// and UV mesh, not the patches (docs/farm.md): `lapflow render` may set
-/// them anew. The feature map counts through settings/feature_digest.
+/// and UV mesh, not the patches (OptionEffect::Picture, docs/farm.md):
+/// `lapflow render` may set them anew. The feature map counts through
+/// settings/feature_digest.
 bool output_only_key(const std::string& key) {
-  static const char* const keys[] = {"/exemplar/color", "/exemplar/feature", "/exemplar/displacement",
-                                     "/resolution", "/aov", "/dump_patches", "/settings/gutter",
-                                     "/settings/mipmap", "/settings/trilinear", "/settings/dilate",
-                                     "/settings/exr_type", "/settings/exr_compression"};
-  for (const char* k : keys)
-    if (key == k) return true;
+  for (const BakeOption& o : bake_option_table())
+    if (o.effect != OptionEffect::Animation && !o.manifest_key.empty() && key == "/" + o.manifest_key) return true;
   return false;
 }
 
@@ -297,6 +261,56 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
   return parse_bake_manifest(text.str(), path.string());
 }
 
+namespace {
+
+/// Reads `option` from the manifest `j` (its settings `settings`) into `o`:
+/// a key the manifest lacks stands for option.absent (or the default), a
+/// value of the wrong type or one that does not parse is an InputError
+/// naming the key ("settings.spacing: 'x' is not a number").
+void read_option(const nlohmann::json& j, const nlohmann::json& settings, const BakeOption& option, BakeOptions& o,
+                 const std::string& path) {
+  const auto [parent, key] = split_key(option.manifest_key);
+  const nlohmann::json* node = nullptr;
+  if (parent == "settings") {
+    if (settings.contains(key)) node = &settings[key];
+  } else if (parent.empty()) {
+    if (j.contains(key)) node = &j[key];
+  } else if (j.contains(parent)) {
+    if (!j[parent].is_object()) throw InputError(path, "'" + parent + "' must be an object");
+    if (j[parent].contains(key)) node = &j[parent][key];
+  }
+  const std::string dotted = parent.empty() ? key : parent + "." + key;
+  std::string text;
+  if (!node) {
+    if (!option.absent) return;
+    text = *option.absent;
+  } else if (parent == "settings" || node->is_string()) {
+    if (!node->is_string()) throw InputError(path, dotted + " must be text, got " + node->dump().substr(0, 40));
+    text = node->get<std::string>();
+  } else if (option.kind == OptionKind::Number && node->is_number()) {
+    text = fmt::format("{}", node->get<double>());
+  } else if (option.kind == OptionKind::Integer) {
+    text = node->is_number_unsigned() ? fmt::format("{}", whole_number<uint64_t>(*node, key, path))
+                                      : fmt::format("{}", whole_number<int64_t>(*node, key, path));
+  } else if (option.kind == OptionKind::Flag && node->is_boolean()) {
+    text = node->get<bool>() ? "true" : "false";
+  } else {
+    const char* expected = option.kind == OptionKind::Flag     ? "true or false"
+                           : option.kind == OptionKind::Number ? "a number"
+                                                               : "text";
+    throw InputError(path, dotted + ": " + node->dump().substr(0, 40) + " is not " + expected);
+  }
+  try {
+    (option.manifest_set ? option.manifest_set : option.set)(o, text);
+  } catch (const std::invalid_argument& e) {
+    const std::string expected =
+        *e.what() ? std::string(e.what()) : fmt::format("one of {}", fmt::join(option.choices, ", "));
+    throw InputError(path, dotted + ": '" + text + "' is not " + expected);
+  }
+}
+
+}  // namespace
+
 BakeManifest parse_bake_manifest(const std::string& text, const std::string& path_text) {
   const fs::path path = path_text;
   std::error_code ec;
@@ -308,38 +322,24 @@ BakeManifest parse_bake_manifest(const std::string& text, const std::string& pat
   }
   BakeManifest m;
   try {
-    if (!j.contains("lapflow_bake")) throw InputError(path.string(), "not a lapflow bake manifest (no 'lapflow_bake')");
+    if (!j.is_object() || !j.contains("lapflow_bake"))
+      throw InputError(path.string(), "not a lapflow bake manifest (no 'lapflow_bake')");
     m.version = whole_number<int>(j.at("lapflow_bake"), "lapflow_bake", path.string());
-    m.name = j.at("name").get<std::string>();
-    m.mesh_pattern = j.value("mesh", "");
-    m.velocity_vdb_pattern = j.value("velocity_vdb", "");
-    m.velocity_grid = j.value("velocity_grid", "");
-    const nlohmann::json& frames = j.at("frames");
-    if (!frames.is_array()) throw InputError(path.string(), "'frames' must be an array of frame numbers");
-    for (const nlohmann::json& f : frames) m.frames.push_back(whole_number<int>(f, "frames", path.string()));
-    m.fps = j.value("fps", 24.0);
-    m.min_speed = j.value("min_speed", 0.0);
-    m.allow_zero_velocity = j.value("allow_zero_velocity", false);
-    if (j.contains("exemplar")) {
-      const auto& e = j["exemplar"];
-      m.exemplar_color = e.value("color", "");
-      m.exemplar_feature = e.value("feature", "");
-      m.exemplar_displacement = e.value("displacement", "");
+    if (!j.contains("name") || !j["name"].is_string()) throw InputError(path.string(), "'name' must be text");
+    m.name = j["name"].get<std::string>();
+    if (!j.contains("frames") || !j["frames"].is_array())
+      throw InputError(path.string(), "'frames' must be an array of frame numbers");
+    for (const nlohmann::json& f : j["frames"]) m.frames.push_back(whole_number<int>(f, "frames", path.string()));
+    const nlohmann::json no_settings = nlohmann::json::object();
+    const nlohmann::json& settings = j.contains("settings") ? j["settings"] : no_settings;
+    if (!settings.is_object()) throw InputError(path.string(), "'settings' must be an object");
+    for (const BakeOption& option : bake_option_table())
+      if (!option.manifest_key.empty()) read_option(j, settings, option, m.options, path.string());
+    if (settings.contains("feature_digest")) {
+      if (!settings["feature_digest"].is_string())
+        throw InputError(path.string(), "settings.feature_digest must be text");
+      m.feature_digest = settings["feature_digest"].get<std::string>();
     }
-    m.mode = j.value("mode", "erosion");
-    m.radius = j.value("radius", 0.0);
-    m.epsilon = j.value("epsilon", 0.0);
-    m.hold = j.value("hold", false);
-    m.hold_margin = j.value("hold_margin", 0.0);
-    m.small_hole = j.value("small_hole", 0.0);
-    m.rest_hole = j.value("rest_hole", 0.0);  // absent before stop 24: no such rule
-    m.merge = j.value("merge", 0.0);
-    m.delta_max = j.value("delta_max", 0.0);
-    m.resolution = whole_number<int>(j, "resolution", 0, path.string());
-    m.seed = whole_number<uint64_t>(j, "seed", 0, path.string());
-    m.aov = j.value("aov", false);
-    m.dump_patches = j.value("dump_patches", false);
-    if (j.contains("settings")) m.settings = j["settings"].get<std::map<std::string, std::string>>();
   } catch (const InputError&) {
     throw;
   } catch (const std::exception& e) {

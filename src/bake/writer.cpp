@@ -115,11 +115,11 @@ double FrameWriter::write_files(const Job& w) const {
   if (o.aov)
     jobs.push_back([&] {
       // Data: float, and never lossy. RLE finds no runs to shorten in it:
-      // every texel holds a patch's (u, v), the gutters too once dilated
-      // (splash at 6144²: 603.9 MB with RLE, 604.1 MB without). So under
+      // every texel holds a patch's (u, v), the gutters too once dilated,
+      // and the file comes out the size of the uncompressed one. So under
       // RLE, the default, it is written uncompressed, which spares the
-      // encoding (docs/performance.md, "Stop 26"); ZIP and PIZ do shrink
-      // it (to 49% and 41%), at two to four times the time.
+      // encoding; ZIP and PIZ do shrink it, at several times the time
+      // (docs/performance.md, "EXR writing and compression").
       ExrCompression lossless = o.exr.compression;
       if (lossless == ExrCompression::Dwaa) lossless = ExrCompression::Zip;
       if (lossless == ExrCompression::Rle) lossless = ExrCompression::None;
@@ -195,8 +195,8 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
     job->textures.displacement = Image();
   }
   job->atlas = std::move(frame->atlas);
-  // The OBJ needs the charts and corner uvs, not the texel map (16 bytes a
-  // chart texel: 464 MB at 6144²), which no later step reads either.
+  // The OBJ needs the charts and corner uvs, not the texel map (8 bytes a
+  // chart texel), which no later step reads either.
   job->atlas.texels = TexelMap{};
   job->surface = frame;
   if (options_.dump_patches) job->patches = patches;

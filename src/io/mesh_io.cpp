@@ -747,4 +747,16 @@ std::string default_output_name(const std::string& mesh_pattern) {
   return name.empty() ? "lapflow" : name;
 }
 
+std::string units_thresholds_text() {
+  return fmt::format("bounds more than {:g} km across, a vertex faster than {:g} km/s, or a position or velocity "
+                     "property declared with an integer PLY type (char, uchar, short, ushort, int, uint)",
+                     kMaxLiquidSize / 1000, kMaxLiquidSpeed / 1000);
+}
+
+std::string units_ok_help(const std::string& verb) {
+  return fmt::format("Also {} frames no liquid in metres has: {}. Without it such a frame is exit 2 naming the file "
+                     "and frame (lapflow inspect warns about them). Coordinates beyond {:g} km stay refused",
+                     verb, units_thresholds_text(), kMaxMeshCoordinate / 1000);
+}
+
 }  // namespace lapflow

@@ -82,9 +82,9 @@ AdvectStats advect_patches(const SurfaceQuery& next, const VelocityField& v_prev
     // sub-steps divide it by n^2: a step shorter than r / 4 needs fewer of
     // them for the same error, max_turn^2 r / 24 (r / 9600) a frame; longer
     // steps keep the plain turn rule (a vortex adds its error up frame after
-    // frame). A vertex that creeps a fraction of a millimetre in a noisy
-    // direction (most of a splash's slow surface) no longer takes up to 64
-    // sub-steps for it.
+    // frame). So a vertex that creeps a fraction of a millimetre in a noisy
+    // direction (most of a splash's slow surface) does not take up to
+    // kMaxSubsteps sub-steps for it.
     const double length = std::max(s1, s2) * dt;
     const double turn_need = turn / options.max_turn * std::min(1.0, std::sqrt(4 * length / r));
     const double need = std::max(reach, turn_need);

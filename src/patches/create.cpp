@@ -307,8 +307,9 @@ Prediction predict_stretch(const SurfaceQuery& surface, const Vec3& p, const Vec
       change += norm(vx[i] - (*options.previous_velocity)(x[i]));
       speed += norm(vx[i]);
     }
-    // Median births see 0.04 on channel (a steady stream), 0.18 on
-    // dam_break and 0.45 on splash: full anticipation up to 0.1, none from 0.3.
+    // Full anticipation up to 0.1, none from 0.3: a steady stream (channel)
+    // stays under the first, splash's median birth is past the second
+    // (docs/temporal.md, "Anticipated shear").
     const double unsteady = speed > 0 ? change / speed : 0;
     anticipate *= std::clamp((0.3 - unsteady) / 0.2, 0.0, 1.0);
     if (!(anticipate > 0)) return out;
@@ -447,9 +448,9 @@ std::optional<Patch> lay_patch(const SurfaceQuery& surface, const SurfaceAdjacen
     // triangles within r reach that far); where the cut is no height field
     // over the tangent plane, the isotropic remesher takes the usual cut below.
     // The remesher's edges lie between 4/5 and 4/3 of its target and average
-    // 0.83 of it (0.139 r for r/6 on dam_break); a lattice of 0.8 of the
-    // target gives the same vertex density, so the same weights (B_V = 0 on
-    // the border weighs more in a coarser patch). docs/patches.md.
+    // little more than the lower bound; a lattice of 0.8 of the target gives
+    // the same vertex density, so the same weights (B_V = 0 on the border
+    // weighs more in a coarser patch). docs/patches.md, "Lattice resampling".
     constexpr double kLatticeEdge = 0.8;
     const double edge = kLatticeEdge * options.remesh_edge * r;
     std::vector<int32_t> cut_triangles;

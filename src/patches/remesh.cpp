@@ -242,9 +242,9 @@ void IsotropicRemesher::split_long_edges(double high2) {
       continue;
     }
     // In halves, as CGAL does. (Splitting into k ~ length / L equal pieces
-    // instead saves the collapses that undo halves of 0.67-0.8 L, 20% of
-    // the remeshing, but leaves patches with 35% fewer triangles than CGAL's
-    // on dam_break: a different mesh density, so not done.)
+    // instead saves the collapses that undo short halves, but leaves patches
+    // with far fewer triangles than CGAL's: a different mesh density, so not
+    // done; docs/patches.md, "The array remesher".)
     const int o = twin_[h], F = int(origin_.size());
     split(h, 0.5);
     push(h);           // a -> m

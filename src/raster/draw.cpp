@@ -323,10 +323,10 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
   // Triangles looked at, found or not, in a per-thread set: a linear search
-  // of `found` made the walk quadratic, and a patch stretched over the whole
-  // liquid (--mode advect) walks the 4096 triangles of the guard for each of
-  // its triangles (140 s a frame on channel at 1024²). The distance test does
-  // not depend on where the walk came from, so each triangle is tested once.
+  // of `found` would make the walk quadratic, and a patch stretched over the
+  // whole liquid (--mode advect) walks the 4096 triangles of the guard for
+  // each of its triangles. The distance test does not depend on where the
+  // walk came from, so each triangle is tested once.
   thread_local StampSet looked;
   looked.clear(ctx.mesh.triangles.size());
   found.clear();

@@ -91,7 +91,7 @@ bool rim_at_rest(const RasterContext& ctx, const PatchSet& patches, const std::v
 // from its own edge instead. The walk goes layer by layer and can be
 // continued to a larger limit (a rim at rest may close a deeper hole). It
 // marks the members it reached in `label` (-3 - id) and gives them back `id`
-// when it ends: no scratch array the size of the atlas (105 MB at 6144^2).
+// when it ends: no scratch array the size of the atlas.
 class HoleDepth {
  public:
   HoleDepth(const RasterContext& ctx, const std::vector<uint32_t>& members, std::vector<int32_t>& label, int32_t id)
@@ -509,7 +509,7 @@ void fill_or_close_holes(RasterBuffers& r, PatchSet& patches, int frame, const P
   ctx.newborn_from = patches.patches.size();
   // A render has no birth to make and no hole to measure: it closes whatever
   // the tracking's decisions left open (below), and skips the hole labelling
-  // (an int per chart texel, 150 MB at 6144^2) altogether.
+  // (an int per chart texel) altogether.
   if (options.fill_holes && make_patch)
     st.patches_born += create_hole_patches(ctx, patches, frame, make_patch, options.max_hole_patches, closed);
   if (blend) {

@@ -4,7 +4,7 @@
 // most of its time in set-up and its own CG solver; a sparse Cholesky on the
 // (complex, Hermitian) normal equations is several times faster on the
 // 100-1000 triangle patches lapflow creates by the thousand. Eigen's
-// SimplicialLDLT (lscm_flatten_reference) spent most of its time on such small
+// SimplicialLDLT (lscm_flatten_reference) spends most of its time on such small
 // systems in AMD's bookkeeping, triplet sorting and symbolic analysis;
 // lscm_flatten builds the matrix on the vertex adjacency, orders it by exact
 // minimum degree on a bit matrix (which also yields the factor's pattern) and
@@ -160,8 +160,7 @@ struct Elimination {
 // into a clique, repeat. The elimination graph is kept as one bit row per
 // vertex, which for a few hundred unknowns costs a few words per update, far
 // less than the quotient-graph bookkeeping of AMD, and gives about the same
-// fill on patch meshes (2040 entries in L against AMD's 1990 on the seeded
-// patches of ~230 vertices). A vertex's row when it is eliminated is the
+// fill on patch meshes (docs/patches.md, "Creation (steps 2-3)"). A vertex's row when it is eliminated is the
 // pattern of its column of L, so the factor's pattern comes for free.
 // kWords > 0: the bit rows have that many words (known to the compiler, so
 // the row updates unroll); 0: as many as nf needs.
@@ -507,7 +506,8 @@ bool lscm_flatten_reference(std::span<const Vec3> positions, std::span<const Tri
   // (d twice the area), and its squared modulus is the conformal energy of
   // the triangle. The normal equations M z = b, M = C^H C, are Hermitian with
   // one unknown per free vertex: half the size of the real system, so the
-  // ordering and factorization are about 4x and 2x cheaper. M is assembled
+  // ordering and factorization are cheaper (docs/performance.md, "Figures
+  // from code comments"). M is assembled
   // directly (lower triangle only, which is all SimplicialLDLT reads).
   using Complex = std::complex<double>;
   std::vector<int> index(nv, -1);

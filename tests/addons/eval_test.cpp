@@ -64,13 +64,13 @@ void write_toy_manifest(const TempDir& dir, const std::string& name, std::size_t
                         int resolution) {
   BakeManifest m;
   m.name = name;
-  m.mesh_pattern = dir / "in.%04d.ply";
+  m.options.mesh_pattern = dir / "in.%04d.ply";
   for (std::size_t k = 0; k < count; ++k) m.frames.push_back(int(k) + 1);
-  m.fps = 24;
-  m.exemplar_color = dir / "ex.exr";
-  m.radius = radius;
-  m.resolution = resolution;
-  m.aov = true;
+  m.options.fps = 24;
+  m.options.exemplar_color = dir / "ex.exr";
+  m.options.patch.radius = radius;
+  m.options.atlas.resolution = resolution;
+  m.options.aov = true;
   write_bake_manifest(m, bake_manifest_path(dir.str(), name));
 }
 
@@ -423,7 +423,7 @@ TEST(Eval, BakeWithoutAovsIsAnInputErrorNamingTheFolder) {
   TempDir dir("eval_noaov");
   write_toy_bake(dir, {ToyFrame{}});
   BakeManifest m = read_bake_manifest(dir.str());
-  m.aov = false;
+  m.options.aov = false;
   write_bake_manifest(m, bake_manifest_path(dir.str(), "toy"));
   try {
     evaluate_bake(dir.str());
@@ -505,7 +505,7 @@ TEST(Eval, StillRemeshedDropHoldsStillAtFixedPoints) {
     if (m.frame >= 3) {
       EXPECT_EQ(*m.born, 0u) << "frame " << m.frame;
     }
-    // Measured: popping below 0.005% on every frame (0.01% without the hold).
+    // Popping under 0.02% on every frame.
     EXPECT_LT(m.popping, 2e-4) << "frame " << m.frame;
     // The per-texel figure also counts patch borders, where a point's side
     // depends on where each atlas samples the surface.
@@ -516,7 +516,7 @@ TEST(Eval, StillRemeshedDropHoldsStillAtFixedPoints) {
 TEST(Eval, SettlingDropAtRestKeepsItsPatches) {
   // A drop that settles below --min-speed: re-meshed every frame and 1.5%
   // flatter (wider at the same volume) each frame, with no velocity, as
-  // viscous_drop's puddle spreads at 2-4 cm/s. The shape change alone
+  // viscous_drop's puddle spreads below its --min-speed. The shape change alone
   // distorts the patches: the paper's memoryless erosion opens holes and
   // breeds patches at rest. With the hold, patches at rest keep their
   // weights and the regions they closed: no birth after frame 2, the same
@@ -554,12 +554,13 @@ TEST(Eval, SettlingDropAtRestKeepsItsPatches) {
 TEST(Eval, ViscousDropAtRestMeetsTheRestTargets) {
   // Issue 12's rest targets on the shared viscous_drop, baked from frame 58
   // as docs/temporal.md measures it, at 1024^2 with --min-speed 0.05 (from
-  // frame 60 every vertex is below it, yet the puddle keeps spreading by
-  // 1-2 mm a frame and is re-meshed every frame): no birth, the same
-  // patches alive, under 0.5% of the rest surface changed (drift at fixed
-  // points) and popping under 0.1% on every frame. Popping was 0.11-0.13% on
-  // frames 65, 70 and 71 before RasterOptions::rest_bound, at the rim, where
-  // a resting patch's far edge reached over the newly uncovered strip.
+  // frame 60 every vertex is below it, yet the puddle keeps spreading and is
+  // re-meshed every frame): no birth, the same patches alive, under 0.5% of
+  // the rest surface changed (drift at fixed points) and popping under 0.1%
+  // on every frame. The popping bound needs RasterOptions::rest_bound, at
+  // the rim, where a resting patch's far edge would reach over the newly
+  // uncovered strip (docs/temporal.md, "At rest: a patch keeps to the ground
+  // it held").
   const std::filesystem::path data =
       std::filesystem::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
   LAPFLOW_NEED_SHARED((data / "viscous_drop.0072.ply").string());

@@ -263,8 +263,8 @@ void write_fake_bake(const std::string& dir, const std::string& mode, const Vec3
   m.name = "shot";
   m.dir = dir;
   m.frames = {1, 2};
-  m.mode = mode;
-  m.radius = 0.1;
+  m.options.raster.mode = parse_raster_mode(mode);
+  m.options.patch.radius = 0.1;
   write_bake_manifest(m, bake_manifest_path(dir, "shot"));
   for (int f : m.frames) {
     test::write_bytes(m.frame_file("obj", f),

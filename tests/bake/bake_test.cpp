@@ -27,8 +27,8 @@ namespace fs = std::filesystem;
 namespace {
 
 /// The folders this test process made (fresh_dir). When every test of the
-/// process passed they are removed at its end: a clone tested once and
-/// deleted (as CI does) left about 1.6 GB in the temp dir for good. A
+/// process passed they are removed at its end: otherwise a clone tested
+/// once and deleted (as CI does) leaves gigabytes in the temp dir for good. A
 /// failed test keeps its folders to look into. ctest runs each test in a
 /// process of its own, so no other test's folder is in the list.
 class MadeFolders : public ::testing::Environment {
@@ -56,7 +56,7 @@ MadeFolders* const made_folders =
 /// two build folders of one tree) must not bake into, and delete, each
 /// other's folders. A build folder's next run reuses and clears its own,
 /// and a passing test removes its folders at the end (MadeFolders), so runs
-/// do not pile up in the temp dir (the every-frame bakes leave 0.45 GB).
+/// do not pile up in the temp dir (the every-frame bakes are large).
 fs::path fresh_dir(const std::string& name) {
   const std::string build = fmt::format("{:08x}", std::hash<std::string>{}(LAPFLOW_BINARY) & 0xffffffffu);
   const fs::path d = fs::temp_directory_path() / ("lapflow_bake_test_" + build + "_" + name);
@@ -343,12 +343,13 @@ TEST(BakeSharedData, DamBreakCoverageOnEveryFrame) {
 
 TEST(BakeSharedData, ViscousDropSpreadingAtRestBreedsNoPatches) {
   // viscous_drop from frame 60: every vertex below 5 cm/s, yet the puddle
-  // keeps spreading (its area grows 0.5% a frame), and its rim uncovers a
-  // strip a texel or so wide each frame. Closed by the patches around it
-  // while narrower than --small-hole, the strip outgrew that rule within a
-  // few frames and 1-3 patches a frame popped in from frame 65 (stop 23).
-  // --rest-hole lets the patches at rest that hold its rim continue it: no
-  // birth, the same patches alive, every texel covered.
+  // keeps spreading, and its rim uncovers a strip a texel or so wide each
+  // frame. The patches around it close it while it is narrower than
+  // --small-hole; it outgrows that rule within a few frames, after which
+  // patches would pop in at the rim (docs/temporal.md, "At rest: the strip a
+  // spreading rim uncovers"). --rest-hole lets the patches at rest that hold
+  // its rim continue it: no birth, the same patches alive, every texel
+  // covered.
   const fs::path data = fs::path(LAPFLOW_SOURCE_DIR) / ".." / "shared" / "data" / "viscous_drop";
   LAPFLOW_NEED_SHARED((data / "viscous_drop.0060.ply").string());
   BakeOptions o = small_bake(data, fresh_dir("rest_hole_default"));

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "io_test_helpers.hpp"
 #include "lapflow/bake/manifest.hpp"
@@ -10,6 +12,15 @@
 
 namespace lapflow {
 namespace {
+
+/// The JSON NAME.bake.json holds for a bake with options `o`.
+nlohmann::json manifest_json_of(const BakeOptions& o) {
+  test::TempDir dir("manifest_json");
+  const std::string path = bake_manifest_path(dir.str(), o.name);
+  write_bake_manifest(make_bake_manifest(o, {1, 2}), path);
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
 
 TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   test::TempDir dir("manifest");
@@ -24,7 +35,7 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   o.seed = 7;
   o.aov = true;
   const BakeManifest m = make_bake_manifest(o, {3, 4, 5});
-  EXPECT_TRUE(std::filesystem::path(m.mesh_pattern).is_absolute());
+  EXPECT_TRUE(std::filesystem::path(m.options.mesh_pattern).is_absolute());
   write_bake_manifest(m, bake_manifest_path(dir.str(), "shot"));
 
   // Read from the folder (the only manifest there) and from the file.
@@ -32,12 +43,12 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
     const BakeManifest r = read_bake_manifest(where);
     EXPECT_EQ(r.name, "shot");
     EXPECT_EQ(r.frames, (std::vector<int>{3, 4, 5}));
-    EXPECT_EQ(r.mode, "advect");
-    EXPECT_EQ(r.mesh_pattern, m.mesh_pattern);
-    EXPECT_DOUBLE_EQ(r.radius, 0.04);
-    EXPECT_EQ(r.resolution, 2048);
-    EXPECT_EQ(r.seed, 7u);
-    EXPECT_TRUE(r.aov);
+    EXPECT_EQ(r.options.raster.mode, RasterMode::NoErosion);
+    EXPECT_EQ(r.options.mesh_pattern, m.options.mesh_pattern);
+    EXPECT_DOUBLE_EQ(r.options.patch.radius, 0.04);
+    EXPECT_EQ(r.options.atlas.resolution, 2048);
+    EXPECT_EQ(r.options.seed, 7u);
+    EXPECT_TRUE(r.options.aov);
     EXPECT_EQ(r.frame_file("color", 4), dir / "shot.color.0004.exr");
     EXPECT_EQ(r.frame_file("obj", 12), dir / "shot.0012.obj");
     EXPECT_EQ(r.frame_file("patches", 5), dir / "shot.patches.0005.ply");
@@ -46,9 +57,9 @@ TEST(BakeManifest, RoundTripsAndFindsFilesBesideItself) {
   EXPECT_THROW(parse_raster_mode("fade"), UsageError);
 }
 
-// Rules added after manifests were first written (--through-flow, stop 29;
-// --rest-bound, stop 30; --run-off, stop 31) read back, and a manifest written before one reads
-// as that rule off, so --resume and the render of an older bake decide as
+// Rules younger than the manifest format (--through-flow, --rest-bound,
+// --run-off) read back, and a manifest without one's key reads as that rule
+// off, so --resume and the render of an older bake decide as
 // that bake did.
 TEST(BakeManifest, LaterRulesReadBackAndAreOffForOlderManifests) {
   struct Rule {
@@ -70,19 +81,19 @@ TEST(BakeManifest, LaterRulesReadBackAndAreOffForOlderManifests) {
     EXPECT_TRUE(rule.of(o)) << "on by default";
     for (const bool on : {true, false}) {
       rule.of(o) = on;
-      const BakeManifest m = make_bake_manifest(o, {1, 2});
-      EXPECT_EQ(m.settings.at(rule.key), on ? "true" : "false");
-      BakeOptions back = bake_options_from_manifest(m);
+      nlohmann::json j = manifest_json_of(o);
+      EXPECT_EQ(j["settings"][rule.key], on ? "true" : "false");
+      BakeOptions back = bake_options_from_manifest(parse_bake_manifest(j.dump(), "/tmp/shot.bake.json"));
       EXPECT_EQ(rule.of(back), on);
     }
     rule.of(o) = true;
-    BakeManifest old = make_bake_manifest(o, {1, 2});
-    old.settings.erase(rule.key);
-    BakeOptions back = bake_options_from_manifest(old);
-    EXPECT_FALSE(rule.of(back));
-    old.settings[rule.key] = "maybe";
+    nlohmann::json old = manifest_json_of(o);
+    old["settings"].erase(rule.key);
+    BakeOptions older = parse_bake_manifest(old.dump(), "/tmp/shot.bake.json").options;
+    EXPECT_FALSE(rule.of(older));
+    old["settings"][rule.key] = "maybe";
     try {
-      bake_options_from_manifest(old);
+      parse_bake_manifest(old.dump(), "/tmp/shot.bake.json");
       ADD_FAILURE() << "a malformed setting must be an InputError";
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find(std::string("settings.") + rule.key + ": 'maybe'"), std::string::npos)
@@ -127,8 +138,8 @@ TEST(BakeManifest, NumbersOutOfRangeAreAnInputErrorNotUndefinedBehaviour) {
   // The largest seed still reads back exactly.
   const BakeManifest m =
       parse_bake_manifest(head + R"(, "seed": 18446744073709551615, "resolution": 4096})", "m.bake.json");
-  EXPECT_EQ(m.seed, 18446744073709551615u);
-  EXPECT_EQ(m.resolution, 4096);
+  EXPECT_EQ(m.options.seed, 18446744073709551615u);
+  EXPECT_EQ(m.options.atlas.resolution, 4096);
   EXPECT_EQ(m.frames, (std::vector<int>{1, 2}));
 }
 

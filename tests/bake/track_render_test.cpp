@@ -175,7 +175,7 @@ TEST_F(TrackRender, RenderChecksItsInputs) {
   r.exemplar_displacement = ex + "lava.disp.png";
   EXPECT_EQ(input_error_of([&] { render(r); }), "") << "another colour over the tracked feature map renders";
   EXPECT_EQ(read_image_header(other / "t.color.0002.exr").width, 64);
-  EXPECT_EQ(read_bake_manifest(other.str()).resolution, 64);
+  EXPECT_EQ(read_bake_manifest(other.str()).options.atlas.resolution, 64);
 
   r.exemplar_feature = ex + "lava.feature.png";
   const std::string feature = input_error_of([&] { render(r); });

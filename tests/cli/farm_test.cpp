@@ -308,8 +308,8 @@ void write_manifest(const std::string& dir, const std::string& name, int first, 
   BakeManifest m;
   m.name = name;
   m.dir = dir;
-  m.mesh_pattern = dir + "/m.%04d.ply";
-  m.exemplar_color = m.exemplar_feature = m.exemplar_displacement = dir + "/x.png";
+  m.options.mesh_pattern = dir + "/m.%04d.ply";
+  m.options.exemplar_color = m.options.exemplar_feature = m.options.exemplar_displacement = dir + "/x.png";
   for (int f = first; f <= last; ++f) m.frames.push_back(f);
   write_bake_manifest(m, bake_manifest_path(dir, name));
 }

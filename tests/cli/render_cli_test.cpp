@@ -59,9 +59,9 @@ TEST(RenderCli, TrackThenRenderAndTheirErrors) {
 // A farm's tracking chunk starts (`lapflow track --resume`, which first
 // removes the temporary files killed runs left) while the previous chunk's
 // render jobs write into the same folder. It must leave a running render's
-// temporary files alone: until stop 34 it removed them, and the render
-// failed with "cannot move the finished file into place" (CI's farm check
-// once; here within 3-11 track starts in three of three runs of 40 frames).
+// temporary files alone: a track that removed them would make the render
+// fail with "cannot move the finished file into place" (docs/bake.md,
+// "Stale temporaries").
 TEST(RenderCli, ATrackStartingBesideARunningRenderLeavesItsFilesAlone) {
   TempDir meshes("render_race_in"), out("render_race_out"), scratch("render_race_scratch");
   DemoOptions demo;

@@ -112,9 +112,10 @@ TEST(DirectFile, AFailedWriteOrOpenGivesItsErrno) {
       OutputError);
 }
 
-// A large EXR (incompressible noise: 17 MB, so OpenEXR's seek back to its
-// offset table lands in a block already written) and a large text file:
-// the same bytes with direct writes on and off, and the pixels read back.
+// A large EXR (incompressible noise over several 4 MiB blocks, so
+// OpenEXR's seek back to its offset table lands in a block already written)
+// and a large text file: the same bytes with direct writes on and off, and
+// the pixels read back.
 TEST(DirectFile, ExrsAndLargeFilesHaveTheSameBytesWithDirectWritesOnOrOff) {
   TempDir dir("direct_exr");
   DirectIoSwitch restore;

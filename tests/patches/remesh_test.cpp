@@ -164,7 +164,7 @@ void compare_remeshers(const PatchMesh& input, double target, const std::functio
   // Bounds chosen after measuring both remeshers on these inputs (see the trace).
   EXPECT_GE(qf.min_edge, 0.2);
   EXPECT_LE(qf.max_edge, 2.0);
-  EXPECT_GE(qf.min_angle, 0.7 * qc.min_angle);  // measured: 0.83 at worst (a dam_break cut)
+  EXPECT_GE(qf.min_angle, 0.7 * qc.min_angle);
   EXPECT_GE(qf.mean_min_angle, qc.mean_min_angle - 1.5);
   EXPECT_LE(qf.below_20, qc.below_20 + 0.02);
   // The triangle count is CGAL's within 10%.

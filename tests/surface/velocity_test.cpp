@@ -86,7 +86,7 @@ TEST(VelocityGrid, AgreesWithDamBreakVertexVelocities) {
     }
     ASSERT_GT(rel.size(), m.vertex_count() / 2);
     std::nth_element(rel.begin(), rel.begin() + rel.size() / 2, rel.end());
-    // The data README measures 6-11%.
+    // The shared data's README has the measured error; this bounds it.
     EXPECT_LT(rel[rel.size() / 2], 0.2);
     // Far outside the liquid the grid is at its background, zero.
     EXPECT_EQ(grid.sample({10, 10, 10}), Vec3());

@@ -187,11 +187,10 @@ class HeapPeakSampler {
   std::thread thread_;
 };
 
-/// Issue 15's benchmark on real data: the shared splash (64k-80k triangles,
-/// droplets, many charts) with the foam exemplar at r = 0.028 (about 5k
-/// patches on frame 1). "Per frame" is the wall time between two frames'
-/// files landing on disk: every stage, the reading ahead and the writing
-/// included, as a user waits for it.
+/// Issue 15's benchmark on real data: the shared splash (droplets, many
+/// charts) with the foam exemplar at r = 0.028. "Per frame" is the wall time
+/// between two frames' files landing on disk: every stage, the reading ahead
+/// and the writing included, as a user waits for it.
 int bake_splash(const std::string& data, int resolution) {
   const std::string pattern = data + "/splash/splash.%04d.ply";
   if (!fs::exists(FramePattern(pattern).path(48))) {

@@ -42,9 +42,9 @@ void bench_fresh_seeding(const std::string& data_dir);
 void bench_atlas(const std::string& data_dir);
 
 /// The UV-mesh OBJ writer (issue 15, tools/bench/bench_atlas.cpp): on the shared
-/// splash frames 1, 12, 24 and 48 (64k-80k triangles), the best of three
-/// write_uv_mesh_obj calls against writing the same number of bytes
-/// already formatted, so formatting and file writing are told apart.
+/// splash frames 1, 12, 24 and 48, the best of three write_uv_mesh_obj calls
+/// against writing the same number of bytes already formatted, so formatting
+/// and file writing are told apart.
 void bench_obj(const std::string& data_dir);
 
 /// One frame of a finished bake computed again `repeats` times in one

@@ -2,7 +2,7 @@
 // times in one process, the tracking from the previous frame's state and the
 // output from its result, each step timed. A bake's frame times share the
 // two cores with the reader (atlases) and the writer (EXR): fine for the
-// whole bake, too noisy to tell a 5% change in one step. Here nothing else
+// whole bake, too noisy to tell a small change in one step. Here nothing else
 // runs, the inputs stay in memory, and every repeat must give the same
 // images and the same patches (a digest of both is printed).
 #include <fmt/format.h>

@@ -58,18 +58,6 @@ void print_error(const std::string& message, const std::string& hint) {
 
 void apply_global_options() { set_thread_count(globals().threads); }
 
-std::string units_thresholds_text() {
-  return fmt::format("bounds more than {:g} km across, a vertex faster than {:g} km/s, or a position or velocity "
-                     "property declared with an integer PLY type (char, uchar, short, ushort, int, uint)",
-                     lapflow::kMaxLiquidSize / 1000, lapflow::kMaxLiquidSpeed / 1000);
-}
-
-std::string units_ok_help(const std::string& verb) {
-  return fmt::format("Also {} frames no liquid in metres has: {}. Without it such a frame is exit 2 naming the file "
-                     "and frame (lapflow inspect warns about them). Coordinates beyond {:g} km stay refused",
-                     verb, units_thresholds_text(), lapflow::kMaxMeshCoordinate / 1000);
-}
-
 Progress::Progress(std::string label, std::size_t total)
     : label_(std::move(label)), total_(total), tty_(::isatty(STDERR_FILENO)), start_(std::chrono::steady_clock::now()) {}
 

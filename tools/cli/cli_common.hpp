@@ -46,11 +46,6 @@ struct StopHandlersScope {
 /// `--remesher lattice|isotropic|cgal` (the old names `grid` and `fast` are
 /// accepted too), shared by bake and patches.
 CLI::Option* add_remesher_option(CLI::App& cmd, lapflow::Remesher& remesher);
-/// The help of `--units-ok` for a command that would `verb` such frames,
-/// with the thresholds (io/mesh_io.hpp).
-std::string units_ok_help(const std::string& verb);
-/// The thresholds of `lapflow inspect`'s warnings, for a help text.
-std::string units_thresholds_text();
 /// Applies --threads (call at the start of every command's callback).
 void apply_global_options();
 
@@ -108,6 +103,7 @@ void add_atlas_command(CLI::App& app);
 void add_patches_command(CLI::App& app);
 void add_bake_command(CLI::App& app);
 void add_track_command(CLI::App& app);
+void add_options_command(CLI::App& app);
 void add_render_command(CLI::App& app);
 void add_eval_command(CLI::App& app);
 /// `lapflow preview DIR --width W --height H` with every other option at its default.

@@ -69,7 +69,8 @@ void run_demo(const DemoCommandOptions& o) {
   b.seed = globals().seed;
   b.patch.radius = o.radius;
   b.atlas.resolution = o.atlas_resolution;
-  // The demo has no --resume: its 100 MB states would only fill the disk.
+  // The demo has no --resume: its states (every patch in full, every frame)
+  // would only fill the disk.
   b.keep_states = 0;
   bake_with_progress(b);
   if (!o.preview) return;

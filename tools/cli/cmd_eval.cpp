@@ -38,7 +38,7 @@ void run_eval(EvalCli& c) {
                      : c.maps_dir;
   std::size_t frames = 0;
   for (int f : manifest.frames) frames += !o.frames || (f >= o.frames->first && f <= o.frames->last);
-  info("lapflow eval: {} ({} mode), {} frames | {} threads", manifest.dir, manifest.mode, frames, thread_count_label());
+  info("lapflow eval: {} ({} mode), {} frames | {} threads", manifest.dir, raster_mode_name(manifest.options.raster.mode), frames, thread_count_label());
   Progress progress("eval", frames);
   EvalReport report = evaluate_bake(c.dir, o, [&](const FrameMetrics& m) {
     progress.step(fmt::format("frame {}: coverage {:.2f}%, contrast {:.3f}, {:.2f}s", m.frame, 100 * m.coverage,

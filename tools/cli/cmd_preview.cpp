@@ -65,9 +65,9 @@ std::vector<std::string> panel_labels(const std::vector<BakeManifest>& bakes, co
     return labels;
   }
   std::set<std::string> modes;
-  for (const BakeManifest& b : bakes) modes.insert(b.mode);
+  for (const BakeManifest& b : bakes) modes.insert(raster_mode_name(b.options.raster.mode));
   for (const BakeManifest& b : bakes)
-    labels.push_back(modes.size() == bakes.size() ? b.mode : fs::path(b.dir).filename().string());
+    labels.push_back(modes.size() == bakes.size() ? raster_mode_name(b.options.raster.mode) : fs::path(b.dir).filename().string());
   return labels;
 }
 
@@ -212,7 +212,7 @@ void run_preview(PreviewCli& c) {
     return;
   }
   const std::string mp4 = (fs::path(out_dir) / (main.name + "." + kind + ".mp4")).string();
-  encode_video(written, mp4, c.fps > 0 ? c.fps : (main.fps > 0 ? main.fps : 24));
+  encode_video(written, mp4, c.fps > 0 ? c.fps : (main.options.fps > 0 ? main.options.fps : 24));
   info("video: {}", mp4);
 }
 

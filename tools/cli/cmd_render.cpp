@@ -1,6 +1,7 @@
 // `lapflow render`: atlases and UV meshes from the patch states of a tracked
 // folder, any frame on its own (docs/farm.md).
 #include "cli_common.hpp"
+#include "option_flags.hpp"
 #include "lapflow/bake/render.hpp"
 #include "lapflow/core/interrupt.hpp"
 
@@ -65,22 +66,24 @@ void add_render_command(CLI::App& app) {
       "Exit codes: 0 ok, 2 bad input (the message names the file: a missing or damaged state, a feature map\n"
       "other than the tracked one), usage or output problem, 130 / 143 stopped by SIGINT / SIGTERM, 1 internal.");
   cmd->add_option("dir", c.o.dir, "The tracked folder (NAME.bake.json and NAME.state.N.bin)")->required();
-  cmd->add_option("--name", c.o.name, "The bake's NAME when the folder holds several");
-  cmd->add_option("--frames", c.frames, "Frame range C-D (default: every frame of the manifest)");
-  cmd->add_option("--resolution", c.o.resolution, "Atlas width = height in texels (default: the manifest's)")
+  cmd->add_option("--name", c.o.name, "The bake's NAME when the folder holds several")->group("Input");
+  cmd->add_option("--frames", c.frames, "Frame range C-D (default: every frame of the manifest)")->group("Input");
+  // The output options of the bake's table, defaulting to the manifest's.
+  add_table_flag(*cmd, "resolution", [](const std::string& t) { c.o.resolution = std::stoi(t); },
+                 "(default: the manifest's)")
       ->check(CLI::Range(16, 32768));
-  cmd->add_option("--exemplar", c.exemplar,
-                  "Colour exemplar, or a shipped one's name (default: the manifest's). Its feature map must be "
-                  "the tracked one");
-  cmd->add_option("--feature", c.feature, "Feature map of --exemplar (default: NAME.feature.* beside it)");
-  cmd->add_option("--displacement", c.displacement, "Displacement map of --exemplar");
-  cmd->add_option("--out", c.o.out_dir, "Output folder (default: the tracked folder)");
-  cmd->add_flag("--aov", c.aov, "Also write NAME.aov.N.exr (default: as the manifest says)");
-  cmd->add_flag("--no-aov", c.no_aov, "Do not write NAME.aov.N.exr");
+  add_table_flag(*cmd, "exemplar", [](const std::string& t) { c.exemplar = t; },
+                 "(default: the manifest's). Its feature map must be the tracked one");
+  add_table_flag(*cmd, "feature", [](const std::string& t) { c.feature = t; }, "(with --exemplar)");
+  add_table_flag(*cmd, "displacement", [](const std::string& t) { c.displacement = t; }, "(with --exemplar)");
+  cmd->add_option("--out", c.o.out_dir, "Output folder (default: the tracked folder)")->group("Output");
+  add_table_flag(*cmd, "aov", [](const std::string& t) { c.aov = t == "true"; }, "(default: as the manifest says)");
+  cmd->add_flag("--no-aov", c.no_aov, "Do not write NAME.aov.N.exr")->group("Output");
   cmd->add_flag("--skip-done", c.o.skip_done,
                 "Skip a frame whose OBJ is already in --out from a render with the same options, newer than its "
-                "state (a re-submitted farm job)");
-  add_max_memory_option(*cmd, c.o.max_memory, "The render's memory estimate must fit");
+                "state (a re-submitted farm job)")
+      ->group("Output");
+  add_max_memory_option(*cmd, c.o.max_memory, "The render's memory estimate must fit")->group("Limits");
   add_global_options(*cmd);
   cmd->callback([] { run_render(c); });
 }

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   cli::add_patches_command(app);
   cli::add_bake_command(app);
   cli::add_track_command(app);
+  cli::add_options_command(app);
   cli::add_render_command(app);
   cli::add_eval_command(app);
   cli::add_preview_command(app);

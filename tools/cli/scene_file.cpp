@@ -9,14 +9,15 @@
 #include <fstream>
 #include <sstream>
 
+#include "lapflow/bake/options.hpp"
 #include "lapflow/core/errors.hpp"
 
 namespace lapflow::cli {
 namespace fs = std::filesystem;
 
 bool is_path_option(const std::string& key) {
-  static const char* keys[] = {"mesh", "exemplar", "feature", "displacement", "out", "velocity-vdb"};
-  return std::any_of(std::begin(keys), std::end(keys), [&](const char* k) { return key == k; });
+  const BakeOption* option = find_bake_option(key);
+  return option && option->kind == OptionKind::Path;
 }
 
 namespace {

@@ -38,7 +38,7 @@ Vec3 demo_flow_map(DemoCase scene, const Vec3& p, double t0, double t1, double p
 TriMesh demo_frame(const DemoOptions& options, int frame);
 
 /// Voxel size (metres) that gives about `triangles` triangles at frame 1
-/// (mid-period frames have up to ~2.4x more on the vortex).
+/// (mid-period frames have more; docs/demo_scene.md, "Numbers").
 double demo_voxel_size_for(DemoCase scene, double triangles);
 
 /// `DIR/NAME.%04d.ply` for frame f.

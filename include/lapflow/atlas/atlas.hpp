@@ -42,8 +42,9 @@ struct TexelMap {
 
 /// The barycentrics (of vertices 1 and 2, as floats) of texel `texel`'s
 /// centre (y * N + x, N = `resolution`) in fluid triangle `triangle`, from
-/// the triangle's corner uvs, clamped into the triangle (the texel map
-/// stored these until stop 39; the arithmetic is the same, so are the floats).
+/// the triangle's corner uvs, clamped into the triangle, with the arithmetic
+/// of the texel map's fill, so the floats are the fill's own. The map does
+/// not store them (docs/atlas.md, "Texel map").
 inline void texel_barycentrics(const std::vector<Vec2>& corner_uv, int resolution, uint32_t texel, int32_t triangle,
                                float& b1, float& b2) {
   const int n = resolution;

@@ -156,9 +156,10 @@ double peak_rss_mb();
 /// before any thread starts (the lapflow CLI and the benchmark do). Peak
 /// memory is unchanged; memory freed between frames stays mapped. The cost
 /// it saves is in docs/performance.md. On one heap, long-lived small blocks
-/// settle between the frames' large arrays and the heap fragments (stop 25);
-/// the executables therefore serve blocks of 8 MiB and more from
-/// LargeBlocks (lapflow/core/large_blocks.hpp) through their operator new.
+/// settle between the frames' large arrays and the heap fragments
+/// (docs/performance.md, "Memory and large blocks"); the executables
+/// therefore serve blocks of 8 MiB and more from LargeBlocks
+/// (lapflow/core/large_blocks.hpp) through their operator new.
 void keep_freed_memory_for_reuse();
 
 }  // namespace lapflow

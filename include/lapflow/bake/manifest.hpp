@@ -16,24 +16,14 @@ struct BakeManifest {
   int version = 1;
   std::string name;                  ///< NAME: outputs are NAME.color.N.exr, ...
   std::string dir;                   ///< the folder holding the manifest (filled by read_bake_manifest)
-  std::string mesh_pattern;          ///< absolute input mesh pattern
-  std::string velocity_vdb_pattern;  ///< absolute, empty for per-vertex velocities
-  std::string velocity_grid;
   std::vector<int> frames;           ///< every frame the bake was asked for, in order
-  double fps = 24, min_speed = 0;
-  bool allow_zero_velocity = false;
-  std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< absolute
-  std::string mode = "erosion";      ///< erosion | blend | advect
-  double radius = 0, epsilon = 0, delta_max = 0;
-  bool hold = false;
-  double hold_margin = 0, small_hole = 0, rest_hole = 0, merge = 0;  ///< RasterOptions::hold_margin, small_hole, rest_hole, merge
-  int resolution = 0;
-  uint64_t seed = 0;
-  bool aov = false, dump_patches = false;
-  /// Every other option that changes the output (velocity band, remesher,
-  /// advection steps, gutter, EXR type, ...), as text that round-trips
-  /// exactly: what `--resume` compares besides the fields above.
-  std::map<std::string, std::string> settings;
+  /// Every option the option table records (lapflow/bake/options.hpp: a
+  /// BakeOption with a manifest_key), paths absolute; the others keep
+  /// BakeOptions' defaults. What `--resume` compares.
+  BakeOptions options;
+  /// settings/feature_digest: exemplar_feature_digest of the tracked feature
+  /// map (empty: not recorded).
+  std::string feature_digest;
 
   /// Path of frame `frame`'s file of the given kind: "obj", "mtl", "color",
   /// "disp", "aov", "patches", "state" (NAME.state.N.bin, bake/state.hpp).

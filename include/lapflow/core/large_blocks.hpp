@@ -5,11 +5,11 @@
 /// A bake allocates and frees a few gigabytes of large arrays every frame, of
 /// sizes that change with the frame's charts and texels. On one malloc heap
 /// (keep_freed_memory_for_reuse) long-lived small blocks such as patches
-/// settle between them, and a larger array of a later frame no longer fits
-/// the holes: the heap grew 0.9 GB over 48 frames of the shared splash at
-/// 6144^2 while the data in use stayed at 2.6 GB (docs/performance.md,
-/// "Stop 25"). Unmapping each large block instead costs the kernel's zeroing
-/// of fresh pages every frame.
+/// settle between them, and a larger array of a later frame fits none of
+/// the holes: the heap grows frame after frame while the data in use stays
+/// level (docs/performance.md, "Memory and large blocks"). Unmapping each
+/// large block instead costs the kernel's zeroing of fresh pages every
+/// frame.
 ///
 /// Here each large block is its own mapping, and a freed one is kept. A
 /// later request takes the smallest kept block that fits (its head, when it

@@ -4,7 +4,7 @@
 /// A bake writes hundreds of megabytes a frame. Through the page cache the
 /// kernel copies every byte into cache pages it allocates first, which on
 /// a virtual machine can cost far more than the copy (docs/performance.md,
-/// "Stop 41"). A
+/// "EXR writing and compression"). A
 /// DirectFile collects the writes in an aligned block and hands the kernel
 /// whole blocks with O_DIRECT, which it moves to the disk without a copy.
 /// Where the file system refuses O_DIRECT (tmpfs, some network and FUSE

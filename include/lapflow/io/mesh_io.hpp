@@ -76,6 +76,13 @@ inline constexpr double kMaxLiquidSize = 1000;
 /// The length of a vertex velocity, in m/s (the fastest splash is tens).
 inline constexpr double kMaxLiquidSpeed = 1000;
 
+/// The thresholds above as a help text says them: "bounds more than 1 km
+/// across, a vertex faster than 1 km/s, or a position or velocity property
+/// declared with an integer PLY type (...)".
+std::string units_thresholds_text();
+/// The help of `--units-ok` for a command that would `verb` ("bake") such frames.
+std::string units_ok_help(const std::string& verb);
+
 /// What `mesh` (with the types its file `declared`) has that no liquid has,
 /// one sentence each, empty when nothing: bounds over kMaxLiquidSize, a
 /// vertex beyond kMaxMeshCoordinate, a used vertex faster than

@@ -46,8 +46,8 @@ struct RasterOptions {
   bool images = true;
   /// With `images`: fill FrameTextures::color_half and displacement_half
   /// (EXR half bits, what a bake writes) instead of color and displacement,
-  /// so the floats are never made (755 MB at 6144^2; docs/performance.md,
-  /// "Stop 35").
+  /// so the floats are never made (docs/performance.md, "EXR writing and
+  /// compression").
   bool half_images = false;
   /// Mark the cells each patch won for Patch::held (read by retire_patches).
   /// false: an output drawn from a tracked state, which retires nothing
