@@ -61,7 +61,7 @@ TEST(RenderCli, TrackThenRenderAndTheirErrors) {
 // render jobs write into the same folder. It must leave a running render's
 // temporary files alone: a track that removed them would make the render
 // fail with "cannot move the finished file into place" (docs/bake.md,
-// "Stale temporaries").
+// "When a frame is there").
 TEST(RenderCli, ATrackStartingBesideARunningRenderLeavesItsFilesAlone) {
   TempDir meshes("render_race_in"), out("render_race_out"), scratch("render_race_scratch");
   DemoOptions demo;
