@@ -2,7 +2,6 @@
 #include "lapflow/bake/manifest.hpp"
 
 #include <fmt/format.h>
-#include <fmt/ranges.h>
 #include <zlib.h>
 
 #include <cstdio>
@@ -303,9 +302,7 @@ void read_option(const nlohmann::json& j, const nlohmann::json& settings, const 
   try {
     (option.manifest_set ? option.manifest_set : option.set)(o, text);
   } catch (const std::invalid_argument& e) {
-    const std::string expected =
-        *e.what() ? std::string(e.what()) : fmt::format("one of {}", fmt::join(option.choices, ", "));
-    throw InputError(path, dotted + ": '" + text + "' is not " + expected);
+    throw InputError(path, dotted + ": '" + text + "' is not " + e.what());
   }
 }
 

@@ -81,19 +81,23 @@ class Table {
   template <class Enum>
   BakeOption& choice(std::string name, Field<Enum> f, std::vector<std::pair<std::string, Enum>> words) {
     BakeOption& o = add(std::move(name), OptionKind::Choice);
-    for (const auto& [word, value] : words) o.choices.push_back(word);
+    // A word whose value an earlier word has is an old spelling: accepted, not shown.
+    std::vector<Enum> shown;
+    for (const auto& [word, value] : words)
+      if (std::find(shown.begin(), shown.end(), value) == shown.end()) shown.push_back(value), o.choices.push_back(word);
     o.get = [f, words](const BakeOptions& b) {
       for (const auto& [word, value] : words)
         if (value == f(const_cast<BakeOptions&>(b))) return word;
       return std::string();
     };
-    o.set = [f, words](BakeOptions& b, const std::string& t) {
+    o.set = [f, words, expected = fmt::format("one of {}", fmt::join(o.choices, ", "))](BakeOptions& b,
+                                                                                      const std::string& t) {
       for (const auto& [word, value] : words)
         if (word == t) {
           f(b) = value;
           return;
         }
-      not_("");  // set_bake_option names the choices
+      not_(expected);
     };
     return o;
   }
@@ -368,7 +372,6 @@ std::vector<BakeOption> make_table() {
                        "How new patches get even triangles: lattice (tangent-plane lattice, isotropic where the cut is "
                        "not a height field), isotropic (remeshing), cgal (CGAL's isotropic remeshing, same "
                        "algorithm); grid and fast are the old names of lattice and isotropic");
-    o.choices.resize(3);  // the old names are accepted, not shown
     Table::recorded_as_number(o, f, 3);
     o.manifest_key = "settings/remesher";
     o.example = "cgal";
@@ -679,9 +682,7 @@ void set_bake_option(BakeOptions& o, const BakeOption& option, const std::string
     }
     option.set(o, text);
   } catch (const std::invalid_argument& e) {
-    const std::string expected =
-        *e.what() ? std::string(e.what()) : fmt::format("one of {}", fmt::join(option.choices, ", "));
-    throw UsageError(option.flag() + ": '" + text + "' is not " + expected);
+    throw UsageError(option.flag() + ": '" + text + "' is not " + e.what());
   }
 }
 
