@@ -252,21 +252,17 @@ void check_bake_state(const BakeState& state, const std::string& path, const Bak
 
 void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& exemplar, const BakeOptions& o) {
   FrameStats& st = frame.stats;
-  Stopwatch clock;
   RasterOptions output = o.raster;
-  output.mark_held = false;  // nothing retires here: the tracking marked the cells
   output.held_texel = o.track_texel;
   // The writer's pixels as the resolve makes them (no float images).
   output.half_images = o.exr.type == ExrPixelType::Half;
-  frame.raster = begin_raster(frame.mesh, frame.atlas, exemplar, output, o.weights,
-                              surface_triangle_locator(*frame.surface, o.raster.radius));
-  draw_patches(frame.raster, patches);
-  st.seconds_draw = clock.lap();
-  close_holes(frame.raster, patches);
-  st.seconds_holes = clock.lap();
-  frame.textures = resolve_texels(frame.raster, patches);
-  st.seconds_resolve = clock.lap();
-  const RasterStats& r = frame.raster.stats;
+  frame.textures = output_pass(frame.mesh, frame.atlas, exemplar, output, o.weights,
+                               surface_triangle_locator(*frame.surface, o.raster.radius), patches);
+  const RasterStats& r = frame.textures.stats;
+  st.seconds_draw = r.seconds_setup + r.seconds_raster;
+  st.seconds_holes = r.seconds_holes;
+  st.seconds_resolve = r.seconds_resolve;
+  st.seconds_dilate = r.seconds_dilate;
   st.charts = frame.atlas.chart_count;
   st.utilization = frame.atlas.report.utilization;
   st.chart_texels = r.chart_texels;
@@ -274,8 +270,6 @@ void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& e
   st.closed_texels = r.closed_texels;
   st.held_texels = r.held_texels;
   st.coverage = r.chart_texels ? double(r.covered_texels) / double(r.chart_texels) : 1.0;
-  dilate_gutter(frame.raster, frame.textures);
-  st.seconds_dilate = clock.lap();
   st.seconds_raster = st.seconds_track + st.seconds_draw + st.seconds_holes + st.seconds_resolve + st.seconds_dilate;
 }
 
@@ -329,24 +323,20 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
   // carries over is decided here: no image.
   RasterOptions tracking = o.raster;
   tracking.held_texel = o.track_texel;
-  tracking.aov = false;
-  tracking.images = false;
-  tracking.dilate = false;
   Stopwatch step;
-  const TriangleLocator locate = surface_triangle_locator(*cur.surface, o.raster.radius);
-  RasterBuffers t = begin_raster(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights, locate);
-  st.tracking.seconds_setup = step.lap();
-  draw_patches(t, patches);
-  st.tracking.seconds_draw = step.lap();
   const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
-  fill_holes(t, patches, cur.number, surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number));
-  st.tracking.seconds_holes = step.lap();
-  resolve_texels(t, patches);
-  st.tracking.seconds_resolve = step.lap();
-  retire_patches(t, patches);
-  st.tracking.seconds_retire = step.lap();
+  const double seconds_adjacency = step.lap();
+  const RasterStats t =
+      track_pass(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights,
+                 surface_triangle_locator(*cur.surface, o.raster.radius), cur.number,
+                 surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number), patches);
+  st.tracking.seconds_setup = t.seconds_setup;
+  st.tracking.seconds_draw = t.seconds_raster;
+  st.tracking.seconds_holes = seconds_adjacency + t.seconds_holes;
+  st.tracking.seconds_resolve = t.seconds_resolve;
+  st.tracking.seconds_retire = t.seconds_retire;
   st.seconds_track = clock.lap();
-  return std::move(t.stats);
+  return t;
 }
 
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
@@ -398,11 +388,10 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
       // stats line follows.
       record_frame_stats(cur, tracked, patches, st, !o.track_only);
       // The next frame reads only this one's number, mesh and velocity: its
-      // raster buffers and tracking atlas go now, not when the next frame
-      // replaces it as `prev` (hundreds of megabytes at production
-      // resolutions that the next frame's own buffers would otherwise come on
-      // top of; docs/performance.md, "Memory and large blocks").
-      cur.raster = RasterBuffers{};
+      // tracking atlas goes now, not when the next frame replaces it as
+      // `prev` (hundreds of megabytes at production resolutions that the next
+      // frame's own buffers would otherwise come on top of;
+      // docs/performance.md, "Memory and large blocks").
       cur.tracking_atlas = SurfaceAtlas{};
       stop_if_asked(writer);
       writer.write(frame, patches, frame_clock.total());

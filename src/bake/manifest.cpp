@@ -326,7 +326,15 @@ BakeManifest parse_bake_manifest(const std::string& text, const std::string& pat
     m.name = j["name"].get<std::string>();
     if (!j.contains("frames") || !j["frames"].is_array())
       throw InputError(path.string(), "'frames' must be an array of frame numbers");
+    if (m.name.empty() || m.name == "." || m.name == ".." || m.name.find_first_of("/\\") != std::string::npos)
+      throw InputError(path.string(), "name: " + quote_token(m.name) +
+                                          " is not a file name (it names the bake's files, in this folder)");
     for (const nlohmann::json& f : j["frames"]) m.frames.push_back(whole_number<int>(f, "frames", path.string()));
+    for (std::size_t i = 1; i < m.frames.size(); ++i)
+      if (m.frames[i] <= m.frames[i - 1])
+        throw InputError(path.string(), "frames: " + std::to_string(m.frames[i]) + " follows " +
+                                            std::to_string(m.frames[i - 1]) +
+                                            " (frame numbers must be strictly increasing)");
     const nlohmann::json no_settings = nlohmann::json::object();
     const nlohmann::json& settings = j.contains("settings") ? j["settings"] : no_settings;
     if (!settings.is_object()) throw InputError(path.string(), "'settings' must be an object");

@@ -258,6 +258,12 @@ std::vector<BakeOption> make_table() {
     BakeOption& o = in(t.string("name", OptionKind::Text, [](BakeOptions& b) -> auto& { return b.name; }), S::Output,
                        E::Neither, "Output file prefix (default: the mesh pattern's name)");
     o.example = "shot";
+    // The files are named after it inside --out: no path in it.
+    o.set = [](BakeOptions& b, const std::string& text) {
+      if (text == "." || text == ".." || text.find_first_of("/\\") != std::string::npos)
+        throw std::invalid_argument("a file name (no folder: the files go in --out)");
+      b.name = text;
+    };
   }
   in(t.flag("resume", [](BakeOptions& b) -> auto& { return b.resume; }), S::Output, E::Neither,
      "Continue after the last complete frame in --out that has a state (NAME.state.N.bin), with the same options; "

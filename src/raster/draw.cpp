@@ -2,10 +2,10 @@
 // every patch triangle is drawn in atlas space and each chart texel keeps the
 // smallest key (patch index << 32 | triangle) whose erosion test passes, by an
 // atomic min, so the winner is the oldest non-eroded patch whatever the
-// drawing order or thread count; retirement (retire_patches) is here too.
-// The resolve pass is in resolve.cpp, hole filling (fill_holes) in holes.cpp,
-// gutter dilation in dilate.cpp, the passes in order (raster_frame) in
-// frame.cpp.
+// drawing order or thread count. The set-up is in setup.cpp, hole filling
+// (step 8) in holes.cpp, the resolve in resolve.cpp, retirement (step 9) in
+// retire.cpp, gutter dilation in dilate.cpp, and the two passes that run
+// these steps in order in passes.cpp.
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -21,6 +21,7 @@
 #include "lapflow/raster/raster.hpp"
 #include "raster/internal.hpp"
 #include "raster/sampling.hpp"
+#include "raster/tiles.hpp"
 
 namespace lapflow {
 namespace detail {
@@ -267,52 +268,6 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
   return g;
 }
 
-}  // namespace
-
-// Square tiles of 8 x 8 atlas pixels, `width` a side, tile (tx, ty) at
-// ty * width + tx. Two widths: covering(N) gives every pixel a tile
-// (TileMask); inside(N) keeps only the tiles wholly inside the atlas
-// (OwnedTiles: an edge tile partly outside it is never pure), so the last
-// pixels of a row or column may have none.
-struct TileGrid {
-  static constexpr int kShift = 3;
-  int width = 0;
-  static TileGrid covering(int N) { return {((N - 1) >> kShift) + 1}; }
-  static TileGrid inside(int N) { return {N >> kShift}; }
-  std::size_t size() const { return std::size_t(width) * width; }
-  // Pixel (x, y) has a tile (x, y >= 0).
-  bool has(int x, int y) const { return (x >> kShift) < width && (y >> kShift) < width; }
-  // The tile of pixel (x, y), which has one.
-  std::size_t at(int x, int y) const { return std::size_t(y >> kShift) * width + std::size_t(x >> kShift); }
-  // pred(tile) holds for some tile under pixel box [x0, x1] x [y0, y1]
-  // (clamped to the grid); tried row by row, stopping at the first.
-  template <class Pred>
-  bool any_tile(int x0, int y0, int x1, int y1, Pred&& pred) const {
-    const int tx0 = std::max(0, x0) >> kShift, tx1 = std::min(width - 1, std::max(0, x1) >> kShift);
-    const int ty0 = std::max(0, y0) >> kShift, ty1 = std::min(width - 1, std::max(0, y1) >> kShift);
-    for (int ty = ty0; ty <= ty1; ++ty)
-      for (int tx = tx0; tx <= tx1; ++tx)
-        if (pred(std::size_t(ty) * width + std::size_t(tx))) return true;
-    return false;
-  }
-};
-
-namespace {
-
-// Tiles marked where a draw may matter: the merge test's second draw only
-// looks at its candidates' texels, so a patch triangle whose pixels all lie
-// in unmarked tiles can be left out.
-struct TileMask {
-  TileGrid grid;
-  std::vector<uint8_t> marked;
-  explicit TileMask(int N) : grid(TileGrid::covering(N)), marked(grid.size(), 0) {}
-  void mark(int x, int y) { marked[grid.at(x, y)] = 1; }
-  // Any marked tile under pixel box [x0, x1] x [y0, y1] (clamped to the atlas).
-  bool any(int x0, int y0, int x1, int y1) const {
-    return grid.any_tile(x0, y0, x1, y1, [&](std::size_t t) { return marked[t] != 0; });
-  }
-};
-
 // Seam fallback: the fluid triangles near the patch triangle (walk over shared
 // vertices from its vertices' triangles, bounded by its bounding sphere plus a
 // margin), each drawn through its own affine map into its own texels.
@@ -376,84 +331,6 @@ bool skip_distorted(const RasterContext& ctx, const Patch& patch, int t) {
 
 }  // namespace
 
-static uint64_t cell_hash(const RasterContext& ctx, const Vec3& p) {
-  const double h = ctx.seam_cell;
-  return hash64(uint64_t(int64_t(std::floor(p.x / h))), uint64_t(int64_t(std::floor(p.y / h))),
-                uint64_t(int64_t(std::floor(p.z / h))));
-}
-
-void setup_context(RasterContext& ctx) {
-  const SurfaceAtlas& atlas = ctx.atlas;
-  const TriMesh& mesh = ctx.mesh;
-  ctx.N = atlas.resolution;
-  const std::size_t nt = mesh.triangles.size();
-  if (atlas.corner_uv.size() != nt * 3 || atlas.chart_of_triangle.size() != nt)
-    throw std::invalid_argument("rasterize: the atlas does not belong to this mesh");
-  const std::size_t NN = std::size_t(ctx.N) * ctx.N;
-  if (NN >= (std::size_t(1) << 31)) throw std::invalid_argument("rasterize: atlas resolution above 46340");
-  const TexelMap& tm = atlas.texels;
-  ctx.index.assign(NN, -1);
-  parallel_for(tm.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) ctx.index[tm.texel[i]] = int32_t(i);
-  }, 1 << 14);
-  ctx.keys.assign(tm.size(), kNoKey);
-
-  ctx.pixel_map.resize(nt);
-  ctx.tri_normal.resize(nt);
-  ctx.tri_centroid.resize(nt);
-  ctx.tri_radius.resize(nt);
-  ctx.tri_area2_px.resize(nt);
-  parallel_for(nt, [&](std::size_t b, std::size_t e) {
-    for (std::size_t t = b; t < e; ++t) {
-      const Tri& T = mesh.triangles[t];
-      const Vec3 &a = mesh.positions[T[0]], &bb = mesh.positions[T[1]], &c = mesh.positions[T[2]];
-      ctx.tri_normal[t] = normalized(cross(bb - a, c - a));
-      const Vec3 m = (a + bb + c) / 3.0;
-      ctx.tri_centroid[t] = m;
-      ctx.tri_radius[t] = std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}));
-      const Vec2* cu = &atlas.corner_uv[t * 3];
-      ctx.tri_area2_px[t] = std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(ctx.N) * ctx.N;
-      TrianglePixelMap& pm = ctx.pixel_map[t];
-      pm.a = a;
-      pm.e0 = bb - a, pm.e1 = c - a;
-      pm.d00 = dot(pm.e0, pm.e0), pm.d01 = dot(pm.e0, pm.e1), pm.d11 = dot(pm.e1, pm.e1);
-      pm.den = pm.d00 * pm.d11 - pm.d01 * pm.d01;
-      pm.ok = pm.den > 1e-14 * pm.d00 * pm.d11;
-      pm.uv0 = cu[0], pm.du1 = cu[1] - cu[0], pm.du2 = cu[2] - cu[0];
-    }
-  }, 4096);
-  // Vertex -> triangles in triangle order (deterministic walk order).
-  ctx.vt_offset.assign(mesh.positions.size() + 1, 0);
-  for (const Tri& T : mesh.triangles)
-    for (int k = 0; k < 3; ++k) ++ctx.vt_offset[T[k] + 1];
-  for (std::size_t v = 0; v < mesh.positions.size(); ++v) ctx.vt_offset[v + 1] += ctx.vt_offset[v];
-  ctx.vt_list.resize(nt * 3);
-  std::vector<int32_t> fill(ctx.vt_offset.begin(), ctx.vt_offset.end() - 1);
-  for (std::size_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) ctx.vt_list[fill[mesh.triangles[t][k]]++] = int32_t(t);
-
-  // Seams: vertices whose triangles lie in more than one chart.
-  std::vector<uint8_t> seam_vertex(mesh.positions.size(), 0);
-  double edge_sum = 0;
-  for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
-    const int32_t b = ctx.vt_offset[v], e = ctx.vt_offset[v + 1];
-    for (int32_t j = b + 1; j < e && !seam_vertex[v]; ++j)
-      seam_vertex[v] = atlas.chart_of_triangle[ctx.vt_list[j]] != atlas.chart_of_triangle[ctx.vt_list[b]];
-  }
-  ctx.near_seam.assign(nt, 0);
-  for (std::size_t t = 0; t < nt; ++t) {
-    const Tri& T = mesh.triangles[t];
-    ctx.near_seam[t] = seam_vertex[T[0]] | seam_vertex[T[1]] | seam_vertex[T[2]];
-    edge_sum += norm(mesh.positions[T[1]] - mesh.positions[T[0]]);
-  }
-  // Cells about a patch triangle's size (r / 6 by default) or a fluid edge.
-  ctx.seam_cell = std::max({nt > 0 ? edge_sum / double(nt) : 1.0, ctx.radius / 4, 1e-9});
-  ctx.seam_grid.clear();
-  for (std::size_t v = 0; v < mesh.positions.size(); ++v)
-    if (seam_vertex[v]) ctx.seam_grid.push_back({cell_hash(ctx, mesh.positions[v]), int32_t(v)});
-  std::sort(ctx.seam_grid.begin(), ctx.seam_grid.end());
-}
-
 static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double radius) {
   if (ctx.seam_grid.empty()) return false;
   const double h = ctx.seam_cell;
@@ -471,73 +348,6 @@ static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double rad
       }
   return false;
 }
-
-// Tiles of 8 x 8 atlas pixels that older patches already keep, so that a
-// younger patch's triangle lying wholly in them is not drawn at all (its every
-// texel would stop at the key test). Only "pure" tiles count: every pixel a
-// texel of one chart, so that a triangle of that chart inside them cannot
-// leak across a seam either; the skip then changes nothing but the time, at
-// any thread count or timing. Per tile: the texels still at kNoKey, and an
-// upper bound of the keys written (every first write raises it before it
-// counts the texel as kept). Built on fresh keys, all kNoKey: draw_patches
-// is the first step after begin_raster.
-struct OwnedTiles {
-  TileGrid grid;               // whole tiles only (TileGrid::inside)
-  std::vector<int32_t> chart;  // every pixel's chart, or -1 (mixed, outside the charts or the atlas)
-  std::unique_ptr<std::atomic<uint32_t>[]> open;
-  std::unique_ptr<std::atomic<uint64_t>[]> max_key;
-
-  explicit OwnedTiles(const RasterContext& ctx) : grid(TileGrid::inside(ctx.N)) {
-    constexpr int s = TileGrid::kShift;
-    const std::size_t n = grid.size(), width = std::size_t(grid.width);
-    chart.assign(n, -1);
-    open = std::make_unique<std::atomic<uint32_t>[]>(n);
-    max_key = std::make_unique<std::atomic<uint64_t>[]>(n);
-    const auto& tri_of = ctx.atlas.texels.triangle;
-    const auto& chart_of = ctx.atlas.chart_of_triangle;
-    const std::size_t N = std::size_t(ctx.N);
-    parallel_for(width, [&](std::size_t b, std::size_t e) {
-      for (std::size_t ty = b; ty < e; ++ty)
-        for (std::size_t tx = 0; tx < width; ++tx) {
-          const std::size_t t = ty * width + tx;
-          open[t].store(1u << (2 * s), std::memory_order_relaxed);
-          max_key[t].store(0, std::memory_order_relaxed);
-          int32_t c = -2;
-          for (std::size_t y = ty << s; y < (ty + 1) << s && c != -1; ++y)
-            for (std::size_t x = tx << s; x < (tx + 1) << s; ++x) {
-              const int32_t idx = ctx.index[y * N + x];
-              const int32_t ci = idx < 0 ? -1 : chart_of[tri_of[idx]];
-              if (c == -2) c = ci;
-              if (ci != c) c = -1;
-              if (c == -1) break;
-            }
-          chart[t] = c < 0 ? -1 : c;
-        }
-    }, 8);
-  }
-  // `n` texels of the tile of pixel (x, y) got their first keys, the largest `key`.
-  void first_write(int x, int y, uint64_t key, uint32_t n = 1) {
-    if (!grid.has(x, y)) return;
-    const std::size_t t = grid.at(x, y);
-    if (chart[t] < 0) return;
-    uint64_t cur = max_key[t].load(std::memory_order_relaxed);
-    while (cur < key && !max_key[t].compare_exchange_weak(cur, key, std::memory_order_relaxed)) {
-    }
-    open[t].fetch_sub(n, std::memory_order_release);
-  }
-  // The chart whose texels fill the tile of pixel (x, y), or -1 (mixed, or
-  // no whole tile there).
-  int32_t tile_chart(int x, int y) const { return grid.has(x, y) ? chart[grid.at(x, y)] : -1; }
-  // Every pixel of box [x0, x1] x [y0, y1] (clamped to the atlas) is a texel of
-  // `c` whose key is below `key`.
-  bool kept_below(int x0, int y0, int x1, int y1, int c, uint64_t key) const {
-    if (!grid.has(x1, y1)) return false;  // the box reaches past the whole tiles
-    return !grid.any_tile(x0, y0, x1, y1, [&](std::size_t t) {
-      return chart[t] != c || open[t].load(std::memory_order_acquire) != 0 ||
-             max_key[t].load(std::memory_order_relaxed) >= key;
-    });
-  }
-};
 
 namespace {
 
@@ -933,66 +743,16 @@ bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int tex
   return pixels_through(ctx, patch, t, texel_tri, out);
 }
 
+void draw_patch_keys(RasterContext& ctx, std::vector<uint64_t>& keys, const Patch& patch, std::size_t patch_index,
+                     const TileMask& clip) {
+  KeySink sink{keys};
+  RasterCounters unused;
+  rasterize_patch_into(ctx, sink, patch, patch_index, unused, &clip);
+}
+
 }  // namespace detail
 
 using namespace detail;
-
-RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                           const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate) {
-  if (!(options.radius > 0)) throw std::invalid_argument("rasterize: radius must be positive");
-  if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize: exemplar not prepared");
-  RasterBuffers r;
-  r.context = std::make_shared<RasterContext>(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
-  RasterContext& ctx = *r.context;
-  ctx.options = options;
-  ctx.exemplar = &exemplar;
-  ctx.locate_fn = std::move(locate);
-  ctx.locate = ctx.locate_fn ? &ctx.locate_fn : nullptr;
-  ctx.radius = options.radius;
-  setup_context(ctx);
-  const int N = ctx.N;
-  RasterStats& st = r.stats;
-  st.chart_texels = atlas.texels.size();
-
-  // Exemplar level of detail: one atlas texel spans texel_world_size / (2r)
-  // of the patch's uv square.
-  double wsum = 0, asum = 0;
-  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-    const double a3 = triangle_area(mesh, int(t));
-    const Vec2* cu = &atlas.corner_uv[t * 3];
-    const double auv = 0.5 * std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(N) * N;
-    if (a3 > 0 && auv > 0 && std::isfinite(a3) && std::isfinite(auv)) {
-      wsum += a3 * std::sqrt(a3 / auv);
-      asum += a3;
-    }
-  }
-  st.texel_world_size = asum > 0 ? wsum / asum : 0;
-  ctx.texel_world_size = st.texel_world_size;
-  const Image& base = exemplar.mips.levels[0];
-  const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
-  ctx.hold = options.hold && options.mode == RasterMode::Erosion;
-  if (ctx.hold) {
-    // One atlas texel in uv; the window reaches a pixel further so that the
-    // bilinear lookup of the maximum bounds every lookup within the reach.
-    ctx.held_reach = st.texel_world_size / (2 * options.radius);
-    const Image& F = exemplar.erosion.feature;
-    const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
-    const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
-    ctx.held_erosion = exemplar.erosion;
-    ctx.held_erosion.feature = max_filter(F, kx, ky);
-    ctx.held_min.build(ctx.held_erosion.feature);
-  }
-  if (options.mode == RasterMode::Erosion) ctx.erosion_min.build(exemplar.erosion.feature);
-  st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
-  if (options.mode == RasterMode::Blend) {
-    ctx.blend.mips = &exemplar.mips;
-    ctx.blend.lod = st.lod;
-    ctx.blend.trilinear = options.trilinear;
-    ctx.blend.sums.assign(atlas.texels.size() * 5, 0);
-    ctx.blend.best.assign(atlas.texels.size(), 0);
-  }
-  return r;
-}
 
 void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   RasterContext& ctx = *r.context;
@@ -1027,138 +787,4 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
     st.distorted_triangles += c.distorted_triangles;
   }
 }
-
-
-namespace {
-
-// A patch that could keep no texel anywhere: the erosion test needs
-// w >= 1 + epsilon - sqrt(F + D) / M >= epsilon, or no triangle is drawn.
-bool eroded_away(const RasterContext& ctx, const Patch& patch) {
-  float max_w = 0;
-  for (float w : patch.weight) max_w = std::max(max_w, w);
-  bool any_drawable = patch.triangle_delta.size() != patch.triangles.size();
-  for (std::size_t t = 0; t < patch.triangle_delta.size() && !any_drawable; ++t)
-    any_drawable = patch.triangle_delta[t] <= ctx.delta_max;
-  return double(max_w) < ctx.erosion.epsilon || !any_drawable;
-}
-
-}  // namespace
-
-namespace {
-
-// RasterOptions::merge: the patches (not born this frame) that won between 1
-// and `limit` texels, every one of which another patch's erosion test also
-// passes. Those others are drawn again into a second key buffer that only
-// the candidates' texels accept (the rest start at key 0, "taken"); only
-// patches near a candidate texel in 3D are drawn, and of those only the
-// triangles that can reach a tile holding a candidate texel (TileMask).
-// Deterministic: atomic minimum as in draw_patches.
-std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& patches,
-                                           const std::vector<uint64_t>& won, double limit) {
-  const std::size_t np = patches.patches.size();
-  std::vector<uint8_t> candidate(np, 0), merged(np, 0);
-  bool any = false;
-  for (std::size_t p = 0; p < std::min(np, ctx.newborn_from); ++p)
-    any |= (candidate[p] = won[p] > 0 && double(won[p]) < limit);
-  if (!any) return merged;
-  const TexelMap& tm = ctx.atlas.texels;
-  std::vector<uint64_t> alt(tm.size(), 0);
-  TileMask clip(ctx.N);
-  const double cell = ctx.radius;
-  auto cell_of = [&](const Vec3& x) {
-    return std::array<int64_t, 3>{int64_t(std::floor(x.x / cell)), int64_t(std::floor(x.y / cell)),
-                                  int64_t(std::floor(x.z / cell))};
-  };
-  std::vector<uint64_t> cells;
-  for (std::size_t i = 0; i < tm.size(); ++i) {
-    const uint64_t key = ctx.keys[i];
-    if (key == kNoKey || !candidate[key >> 32]) continue;
-    alt[i] = kNoKey;
-    clip.mark(int(tm.texel[i] % uint32_t(ctx.N)), int(tm.texel[i] / uint32_t(ctx.N)));
-    const auto c = cell_of(texel_position(ctx, i));
-    cells.push_back(hash64(uint64_t(c[0]), uint64_t(c[1]), uint64_t(c[2])));
-  }
-  std::sort(cells.begin(), cells.end());
-  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-  auto near = [&](const Patch& patch) {
-    // Patch vertices lie within about r of its centre: look a cell around.
-    // A patch stretched farther is not drawn, which can only keep a
-    // candidate (never retire one wrongly).
-    const auto c = cell_of(patch.center);
-    for (int64_t dz = -1; dz <= 1; ++dz)
-      for (int64_t dy = -1; dy <= 1; ++dy)
-        for (int64_t dx = -1; dx <= 1; ++dx)
-          if (std::binary_search(cells.begin(), cells.end(),
-                                 hash64(uint64_t(c[0] + dx), uint64_t(c[1] + dy), uint64_t(c[2] + dz))))
-            return true;
-    return false;
-  };
-  parallel_for(np, [&](std::size_t b, std::size_t e) {
-    KeySink sink{alt};
-    RasterCounters unused;
-    for (std::size_t q = b; q < e; ++q)
-      // Not a candidate, and not retiring for winning nothing.
-      if (!candidate[q] && won[q] > 0 && near(patches.patches[q]))
-        rasterize_patch_into(ctx, sink, patches.patches[q], q, unused, &clip);
-  }, 4);
-  std::vector<uint64_t> open(np, 0);
-  for (std::size_t i = 0; i < tm.size(); ++i)
-    if (alt[i] == kNoKey) ++open[ctx.keys[i] >> 32];
-  for (std::size_t p = 0; p < np; ++p) merged[p] = candidate[p] && open[p] == 0;
-  return merged;
-}
-
-}  // namespace
-
-void retire_patches(RasterBuffers& r, PatchSet& patches) {
-  RasterContext& ctx = *r.context;
-  RasterStats& st = r.stats;
-  if (r.texels_won.size() != patches.patches.size())
-    throw std::invalid_argument("retire_patches: resolve_texels first, on the same patches");
-  const bool blend = ctx.options.mode == RasterMode::Blend;
-  // After hole filling, so a newborn patch that covered nothing goes too.
-  const bool retire = ctx.options.retire && ctx.options.mode != RasterMode::NoErosion;
-  const double merge_limit = retire && ctx.mode == RasterMode::Erosion && ctx.options.merge > 0 &&
-                                    ctx.texel_world_size > 0
-                                ? ctx.options.merge * 3.14159265358979323846 * (ctx.radius / ctx.texel_world_size) *
-                                      (ctx.radius / ctx.texel_world_size)
-                                : 0;
-  const std::vector<uint8_t> merged =
-      merge_limit > 0 ? covered_small_patches(ctx, patches, r.texels_won, merge_limit) : std::vector<uint8_t>{};
-  std::vector<Patch> kept;
-  kept.reserve(patches.patches.size());
-  st.texels_per_patch.clear();
-  for (std::size_t p = 0; p < patches.patches.size(); ++p) {
-    const uint64_t n = r.texels_won[p];
-    if (!merged.empty() && merged[p]) {
-      ++st.patches_retired;
-      ++st.retired_merged;
-      continue;
-    }
-    // Blend: a patch that gave weight to no texel retires, unless a forced
-    // texel names it.
-    if (retire && n == 0 && (!blend || ctx.blend.contributed[p] == 0)) {
-      ++st.patches_retired;
-      ++(eroded_away(ctx, patches.patches[p]) ? st.retired_eroded : st.retired_hidden);
-      continue;
-    }
-    Patch& patch = patches.patches[p];
-    if (ctx.held_next.empty()) {
-      patch.held.clear();
-    } else {
-      // Held cells stay held (the union over the patch's life): where the
-      // patch no longer passes even with the slack, the cell has no effect.
-      const uint64_t* words = &ctx.held_next[p * kHeldWords];
-      if (std::any_of(words, words + kHeldWords, [](uint64_t w) { return w != 0; })) {
-        if (patch.held.empty()) patch.held.assign(kHeldWords, 0);
-        for (std::size_t k = 0; k < kHeldWords; ++k) patch.held[k] |= words[k];
-      }
-    }
-    kept.push_back(std::move(patch));
-    st.texels_per_patch.push_back(n);
-  }
-  patches.patches = std::move(kept);
-  r.texels_won = st.texels_per_patch;
-}
-
 }  // namespace lapflow

@@ -1,8 +1,8 @@
 #pragma once
 // The state behind RasterBuffers: one frame's lapped rasterization, carried
-// through the steps of raster.hpp (draw.cpp: set-up, draw, resolve, retire,
-// dilate; holes.cpp: hole filling; blend.cpp: Blend mode; dilate.cpp: the
-// gutter's source map).
+// through the steps of raster.hpp (setup.cpp: set-up; draw.cpp: draw;
+// holes.cpp: hole filling; resolve.cpp: resolve; retire.cpp: retirement;
+// blend.cpp: Blend mode; dilate.cpp: the gutter).
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -164,7 +164,7 @@ struct RasterCounters {
 /// Builds index, keys and the fluid-triangle tables.
 void setup_context(RasterContext& ctx);
 
-/// Tiles that older patches keep (draw.cpp), used by draw_patches to skip
+/// Tiles that older patches keep (tiles.hpp), used by draw_patches to skip
 /// drawing that cannot win a texel.
 struct OwnedTiles;
 
@@ -173,6 +173,15 @@ struct OwnedTiles;
 /// `owned`: see OwnedTiles (draw_patches only; it must see every write).
 void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_index, RasterCounters& counters,
                      OwnedTiles* owned = nullptr);
+
+/// Tiles the merge test's second draw looks at (tiles.hpp).
+struct TileMask;
+
+/// Rasterizes `patch` into `keys` (one per chart texel) by atomic min,
+/// leaving out triangles that reach no tile `clip` marks: the merge test's
+/// second draw (retire.cpp). Safe to call concurrently for different patches.
+void draw_patch_keys(RasterContext& ctx, std::vector<uint64_t>& keys, const Patch& patch, std::size_t patch_index,
+                     const TileMask& clip);
 
 /// sure_passes: every texel of a patch triangle passes the erosion test
 /// (keeps, kSureKeeps) or the held test (keeps_held, kSureHeld).

@@ -21,15 +21,4 @@ TriangleLocator surface_triangle_locator(const SurfaceQuery& surface, double rad
   };
 }
 
-FrameTextures raster_frame(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                           const RasterOptions& options, const PatchOptions& patch_options,
-                           const WeightOptions& weights, int frame, PatchSet& patches) {
-  // Built once per frame: the plain create_patch overload builds it per call,
-  // which made hole filling O(patches x mesh).
-  const SurfaceAdjacency adjacency = build_surface_adjacency(surface.mesh());
-  return raster_frame(surface.mesh(), atlas, exemplar, options, weights, frame,
-                      surface_patch_maker(surface, adjacency, patch_options, weights, frame),
-                      surface_triangle_locator(surface, options.radius), patches);
-}
-
 }  // namespace lapflow

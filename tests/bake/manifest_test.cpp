@@ -118,6 +118,30 @@ TEST(BakeManifest, ErrorsNameTheFile) {
   EXPECT_THROW(read_bake_manifest(dir.str(), "c"), InputError);      // named one missing
 }
 
+TEST(BakeManifest, FramesOutOfOrderAndANameWithAPathAreInputErrorsNamingTheKey) {
+  // Frames in descending order once crashed `lapflow render`; a name with a
+  // path in it would have the files written outside the folder.
+  const std::vector<std::pair<std::string, std::string>> bad{
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [3, 2, 1]})", "frames: 2 follows 3"},
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [1, 1]})", "frames: 1 follows 1"},
+      {R"({"lapflow_bake": 1, "name": "../m", "frames": [1]})", "name: '../m' is not a file name"},
+      {R"({"lapflow_bake": 1, "name": "a/b", "frames": [1]})", "name: 'a/b' is not a file name"},
+      {R"({"lapflow_bake": 1, "name": "a\\b", "frames": [1]})", "is not a file name"},
+      {R"({"lapflow_bake": 1, "name": "..", "frames": [1]})", "is not a file name"},
+      {R"({"lapflow_bake": 1, "name": "", "frames": [1]})", "is not a file name"}};
+  for (const auto& [text, reason] : bad) {
+    try {
+      parse_bake_manifest(text, "m.bake.json");
+      ADD_FAILURE() << text << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "m.bake.json");
+      EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(parse_bake_manifest(R"({"lapflow_bake": 1, "name": "m", "frames": [1, 5, 9]})", "m.bake.json").frames,
+            (std::vector<int>{1, 5, 9}));
+}
+
 TEST(BakeManifest, NumbersOutOfRangeAreAnInputErrorNotUndefinedBehaviour) {
   // Found by fuzz_manifest (tests/fuzz/corpus/manifest/regress_seed_beyond_uint64.bake.json):
   // a seed of 1.8e19 written as a float was converted to uint64_t unchecked.

@@ -61,6 +61,7 @@ TEST(OptionTable, BadValuesAreUsageErrorsNamingTheFlagAndWhatItTakes) {
   EXPECT_EQ(message("orientation", "world:0,0,0"),
             "--orientation: 'world:0,0,0' is not a direction (a zero or infinite one is not)");
   EXPECT_EQ(message("frames", "ten"), "--frames: 'ten' is not a frame range A-B");
+  EXPECT_EQ(message("name", "../shot"), "--name: '../shot' is not a file name (no folder: the files go in --out)");
   EXPECT_EQ(message("remesher", "grid"), "accepted");  // the old name
 }
 

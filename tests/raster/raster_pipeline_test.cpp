@@ -23,6 +23,21 @@
 namespace lapflow {
 namespace {
 
+// One frame as a bake runs it with the tracking at the output's resolution
+// (track_pass with births by create_patch on `q`, then output_pass): the
+// output pass's images with the tracking pass's counts (stats).
+FrameTextures run_frame(const SurfaceQuery& q, const SurfaceAtlas& atlas, const RasterExemplar& rex,
+                        const RasterOptions& ro, const PatchOptions& popt, const WeightOptions& wopt, int frame,
+                        PatchSet& patches) {
+  const SurfaceAdjacency adjacency = build_surface_adjacency(q.mesh());
+  const TriangleLocator locate = surface_triangle_locator(q, ro.radius);
+  RasterStats tracked = track_pass(q.mesh(), atlas, rex, ro, wopt, locate, frame,
+                                   surface_patch_maker(q, adjacency, popt, wopt, frame), patches);
+  FrameTextures out = output_pass(q.mesh(), atlas, rex, ro, wopt, locate, patches);
+  out.stats = std::move(tracked);
+  return out;
+}
+
 struct SphereScene {
   TriMesh mesh = test::icosphere(4, 1.0);
   SurfaceAtlas atlas;
@@ -91,7 +106,7 @@ TEST(RasterPipeline, SphereFullCoverageOnePatchPerTexelOldestFirst) {
   PatchSet patches = sc.seeded(q);
   ASSERT_GT(patches.patches.size(), 20u);
   const std::size_t seeded = patches.patches.size();
-  const FrameTextures out = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+  const FrameTextures out = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
   const RasterStats& st = out.stats;
   ASSERT_EQ(st.chart_texels, sc.atlas.texels.size());
   EXPECT_EQ(st.covered_texels, st.chart_texels);
@@ -136,9 +151,9 @@ TEST(RasterPipeline, StillSurfaceGivesIdenticalFramesAndOneAndTwoThreadsAgree) {
   auto bake = [&](int threads) {
     set_thread_count(threads);
     PatchSet patches = sc.seeded(q);
-    FrameTextures f0 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+    FrameTextures f0 = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
     // Zero velocity, same mesh: frame 1 rasterizes the same patches again.
-    FrameTextures f1 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+    FrameTextures f1 = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
     set_thread_count(0);
     return std::make_pair(std::move(f0), std::move(f1));
   };
@@ -186,7 +201,7 @@ TEST(RasterPipeline, DamBreakFrameFullCoverage) {
     RasterOptions ro;
     ro.radius = popt.radius;
     ro.mode = mode;
-    const FrameTextures out = raster_frame(q, atlas, rex, ro, popt, wopt, 40, patches);
+    const FrameTextures out = run_frame(q, atlas, rex, ro, popt, wopt, 40, patches);
     EXPECT_EQ(out.stats.covered_texels, out.stats.chart_texels);
     EXPECT_LE(out.stats.forced_texels, out.stats.chart_texels / 1000);
     EXPECT_LT(out.stats.patches_born, patches.patches.size());
@@ -215,12 +230,12 @@ TEST(RasterPipeline, HoldKeepsAStillSurfaceIdentical) {
   sc.ropt.hold = true;
   SurfaceQuery q(sc.mesh);
   PatchSet patches = sc.seeded(q);
-  FrameTextures f0 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+  FrameTextures f0 = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
   std::size_t held_patches = 0;
   for (const Patch& p : patches.patches) held_patches += !p.held.empty();
   EXPECT_GT(held_patches, patches.patches.size() / 2);
-  FrameTextures f1 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
-  FrameTextures f2 = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 2, patches);
+  FrameTextures f1 = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+  FrameTextures f2 = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 2, patches);
   EXPECT_EQ(f1.stats.patches_born + f2.stats.patches_born, 0u);
   EXPECT_EQ(f1.stats.patches_retired + f2.stats.patches_retired, 0u);
   EXPECT_TRUE(f0.color.pixels == f1.color.pixels);
@@ -249,7 +264,7 @@ TEST(RasterPipeline, RestBoundKeepsAPatchAtRestToTheCellsItHeld) {
     sc.ropt.rest_bound = rest_bound;
     SurfaceQuery q(sc.mesh);
     PatchSet patches = sc.seeded(q);
-    raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
+    run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 0, patches);
     // The patch that won the most cells.
     std::size_t best = 0, most = 0;
     for (std::size_t p = 0; p < patches.patches.size(); ++p) {
@@ -268,11 +283,13 @@ TEST(RasterPipeline, RestBoundKeepsAPatchAtRestToTheCellsItHeld) {
         }
     // `a` is not used past here: the frame may append newborns and move the patches.
     for (Patch& p : patches.patches) p.at_rest = true;
-    const FrameTextures f = raster_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
+    const FrameTextures f = run_frame(q, sc.atlas, sc.rex, sc.ropt, sc.popt, sc.wopt, 1, patches);
     beyond = uncovered = 0;
-    // The disc grown by the reach and the diagonal of a cell.
+    // The disc grown by the reach twice (the tracking pass marks the cells
+    // the patch won within one reach; the output pass draws within one reach
+    // of those) and the diagonal of a cell.
     const double texel_uv = f.stats.texel_world_size / (2 * sc.ropt.radius);
-    const double reach = kDisc + (rest_reach_cells(texel_uv) + 1.5) / kHeldCells;
+    const double reach = kDisc + (2 * rest_reach_cells(texel_uv) + 1.5) / kHeldCells;
     for (std::size_t k = 0; k < sc.atlas.texels.size(); ++k) {
       const float* t = &f.aov.pixels[std::size_t(sc.atlas.texels.texel[k]) * 4];
       uncovered += t[0] < 0;

@@ -195,9 +195,11 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
   const double r = 1.0 / side;
   fmt::print("bench_raster: {} fluid triangles, {} patches of r = {:.4f} ({} triangles each), {} threads\n",
              2 * grid_cells * grid_cells, side * side, r, 2 * 12 * 12, thread_count());
-  fmt::print("{:>6} {:>10} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>6} {:>7} {:>7}\n", "N", "texels", "setup",
-             "raster", "holes", "resolve", "dilate", "total", "seam", "born", "retired", "RSS GB");
-  fmt::print("       (seconds are wall per sub-stage; 'cpu' = process CPU seconds of the whole call)\n");
+  fmt::print("{:>6} {:>10} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>6} {:>7} {:>7}\n", "N", "texels",
+             "pass", "setup", "draw", "holes", "resolve", "retire", "dilate", "total", "seam", "born", "retired",
+             "RSS GB");
+  fmt::print("       (track_pass then output_pass at the same resolution, as a bake with --track-texel at the output's\n"
+             "        texel; seconds are wall per step; 'cpu' = process CPU seconds of both passes)\n");
   for (int N : resolutions) {
     const Plane P = make_plane(grid_cells, 16, N, 4);
     PatchSet patches;
@@ -218,15 +220,18 @@ void bench_raster(const std::vector<int>& resolutions, int grid_cells, int targe
       o.mode = std::string(m) == "blend" ? RasterMode::Blend
                                          : std::string(m) == "advect" ? RasterMode::NoErosion : RasterMode::Erosion;
     const double cpu0 = cpu_seconds();
-    const FrameTextures out =
-        raster_frame(P.mesh, P.atlas, rex, o, WeightOptions{}, 0, maker, TriangleLocator{}, patches);
+    const RasterStats t =
+        track_pass(P.mesh, P.atlas, rex, o, WeightOptions{}, TriangleLocator{}, 0, maker, patches);
+    const FrameTextures out = output_pass(P.mesh, P.atlas, rex, o, WeightOptions{}, TriangleLocator{}, patches);
     const RasterStats& s = out.stats;
-    fmt::print("{:>6} {:>10} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7} {:>6} {:>7} {:>7.2f}\n", N,
-               s.chart_texels, s.seconds_setup, s.seconds_raster, s.seconds_holes, s.seconds_resolve,
-               s.seconds_dilate, s.seconds_total, s.seam_triangles, s.patches_born, s.patches_retired, peak_rss_gb());
+    for (const auto& [pass, x] : {std::pair<const char*, const RasterStats&>{"track", t}, {"output", s}})
+      fmt::print("{:>6} {:>10} {:>6} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7.3f} {:>7} {:>6} {:>7} {:>7.2f}\n",
+                 N, x.chart_texels, pass, x.seconds_setup, x.seconds_raster, x.seconds_holes, x.seconds_resolve,
+                 x.seconds_retire, x.seconds_dilate, x.seconds_total, x.seam_triangles, x.patches_born,
+                 x.patches_retired, peak_rss_gb());
     fmt::print("       cpu {:.3f} s, output digest {:016x}\n", cpu_seconds() - cpu0, digest(out));
-    if (s.covered_texels != s.chart_texels)
-      fmt::print("  coverage {} of {} chart texels!\n", s.covered_texels, s.chart_texels);
+    if (t.covered_texels != t.chart_texels)
+      fmt::print("  coverage {} of {} chart texels!\n", t.covered_texels, t.chart_texels);
   }
 }
 

@@ -1,6 +1,6 @@
 #pragma once
 /// \file frame.hpp One frame of a bake: everything known about it (mesh,
-/// surface queries, velocity, atlas, raster buffers, textures, statistics),
+/// surface queries, velocity, atlases, textures, statistics),
 /// and load_frame(), the one way every command reads a frame and its
 /// velocity. The patches are not part of it: they carry over from frame to
 /// frame (PatchSet).
@@ -122,7 +122,6 @@ struct Frame {
   std::string velocity_source;                    ///< "vertex", "vdb:NAME", "zero", ...
   SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas): the output's
   SurfaceAtlas tracking_atlas;                    ///< the same at the tracking resolution
-  RasterBuffers raster;                           ///< steps 7-9 in progress
   FrameTextures textures;                         ///< the atlas images once resolved
   FrameStats stats;
 };

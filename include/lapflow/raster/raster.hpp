@@ -161,7 +161,7 @@ struct RasterStats {
   std::size_t retired_merged = 0;  ///< of those: small, their texels covered by others (RasterOptions::merge)
   std::size_t seam_triangles = 0;  ///< patch triangles rasterized through the seam fallback
   /// Patch triangles the draw left out, wholly under texels older patches
-  /// keep (raster/draw.cpp, OwnedTiles): they could win nothing.
+  /// keep (raster/tiles.hpp, OwnedTiles): they could win nothing.
   std::size_t skipped_triangles = 0;
   std::size_t distorted_triangles = 0;  ///< patch triangles skipped because delta > delta_max
   double lod = 0;                  ///< exemplar level of detail used (log2 exemplar pixels per atlas texel)
@@ -169,8 +169,9 @@ struct RasterStats {
   /// Chart texels won by each patch, aligned with PatchSet::patches after retirement
   /// (Blend: texels where it has the largest weight, i.e. names the AOV).
   std::vector<uint64_t> texels_per_patch;
-  double seconds_setup = 0, seconds_raster = 0, seconds_holes = 0, seconds_resolve = 0, seconds_dilate = 0,
-         seconds_total = 0;
+  /// Wall seconds of the steps of track_pass / output_pass (raster: the draw).
+  double seconds_setup = 0, seconds_raster = 0, seconds_holes = 0, seconds_resolve = 0, seconds_retire = 0,
+         seconds_dilate = 0, seconds_total = 0;
 };
 
 /// The atlas images of one frame, resolution x resolution, row 0 at the top
@@ -254,13 +255,25 @@ void retire_patches(RasterBuffers& buffers, PatchSet& patches);
 /// then frees the buffers' per-texel state.
 void dilate_gutter(RasterBuffers& buffers, FrameTextures& textures);
 
-/// Steps 7-9 and the dilation in the bake's order, timed into
-/// FrameTextures::stats: for callers that need no step in between (tests,
-/// the benchmark). Hole-filling patches come from `make_patch` (empty: no
-/// hole filling).
-FrameTextures raster_frame(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                           const RasterOptions& options, const WeightOptions& weights, int frame,
-                           const PatchMaker& make_patch, const TriangleLocator& locate, PatchSet& patches);
+/// The tracking pass of a frame (ALGORITHM.md steps 7-9), as `bake` and
+/// `lapflow track` run it at the tracking resolution: draw_patches,
+/// fill_holes with births from `make_patch` (empty: no birth), resolve_texels
+/// (the texels each patch won and the cells it held; no image) and
+/// retire_patches. `patches` leave as they carry over to the next frame.
+/// Draws no image whatever `options` say. Returns the counts and each step's
+/// wall seconds (seconds_raster is the draw).
+RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                       const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
+                       int frame, const PatchMaker& make_patch, PatchSet& patches);
+
+/// The output pass of a frame, as `bake` and `lapflow render` draw the
+/// patches as they leave the tracking pass (docs/farm.md): draw_patches,
+/// close_holes (no birth), resolve_texels and dilate_gutter. Marks no held
+/// cell (RasterOptions::mark_held is off). FrameTextures::stats holds the
+/// counts and each step's wall seconds.
+FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                          const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
+                          const PatchSet& patches);
 
 /// Hole-filling patches by create_patch on `surface` (the fluid triangle's
 /// normal at the texel). `adjacency` (of surface.mesh()) must outlive it.
@@ -270,10 +283,5 @@ PatchMaker surface_patch_maker(const SurfaceQuery& surface, const SurfaceAdjacen
 /// The fluid triangle under a patch vertex by closest point within r / 4
 /// (the advection's projection limit): farther, it is not on this surface.
 TriangleLocator surface_triangle_locator(const SurfaceQuery& surface, double radius);
-
-/// raster_frame with hole-filling patches and vertex location on `surface`.
-FrameTextures raster_frame(const SurfaceQuery& surface, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
-                           const RasterOptions& options, const PatchOptions& patch_options,
-                           const WeightOptions& weights, int frame, PatchSet& patches);
 
 }  // namespace lapflow
