@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <optional>
 
 #include "lapflow/core/errors.hpp"
@@ -151,6 +152,84 @@ InspectSummary summarize(const std::vector<FrameInspection>& results) {
   s.tri_mean = s.readable ? tri_sum / double(s.readable) : 0;
   s.mean_difference = diff_n ? diff_sum / double(diff_n) : -1;
   return s;
+}
+
+namespace {
+
+nlohmann::json box_json(const Box3& b) {
+  if (b.empty()) return nullptr;
+  return {{"min", {b.lo.x, b.lo.y, b.lo.z}}, {"max", {b.hi.x, b.hi.y, b.hi.z}}};
+}
+
+nlohmann::json speed_json(const SpeedStats& s) {
+  if (!s.present) return nullptr;
+  return {{"min", s.min}, {"mean", s.mean}, {"max", s.max}};
+}
+
+}  // namespace
+
+std::string inspection_warning(const FrameInspection& r, const std::string& problem) {
+  return InputError(r.file, problem, r.frame).what();
+}
+
+namespace {
+
+nlohmann::json inspection_json_value(const InspectOptions& o, const std::vector<FrameInspection>& results, const InspectSummary& s) {
+  nlohmann::json frames = nlohmann::json::array(), all_warnings = nlohmann::json::array();
+  for (const FrameInspection& r : results)
+    for (const std::string& w : r.warnings) all_warnings.push_back(inspection_warning(r, w));
+  for (const FrameInspection& r : results) {
+    nlohmann::json f = {{"frame", r.frame}, {"file", r.file}};
+    if (r.error) {
+      f["error"] = r.error_text;
+    } else {
+      const MeshReport& m = r.report;
+      f.update({{"triangles", m.triangles}, {"vertices", m.vertices}, {"components", m.components},
+                {"non_manifold_edges", m.non_manifold_edges}, {"non_manifold_vertices", m.non_manifold_vertices},
+                {"boundary_edges", m.boundary_edges}, {"degenerate_triangles", m.degenerate_triangles},
+                {"isolated_vertices", m.isolated_vertices}, {"area", m.area}, {"bounds", box_json(m.bounds)},
+                {"empty", m.triangles == 0}, {"velocity_source", r.grid_speed.present ? "vdb" : (r.vertex_speed.present ? "vertex" : "none")},
+                {"speed", speed_json(used_speed(r))}, {"vertex_speed", speed_json(r.vertex_speed)},
+                {"warnings", r.warnings}});
+      if (r.grid_speed.present) {
+        f["grid"] = {{"name", r.grid_name}, {"speed", speed_json(r.grid_speed)}};
+        f["grid"]["relative_difference"] = r.grid_difference >= 0 ? nlohmann::json(r.grid_difference) : nlohmann::json(nullptr);
+      }
+    }
+    frames.push_back(std::move(f));
+  }
+  nlohmann::json summary = {{"frames", results.size()},
+                            {"first_frame", results.front().frame},
+                            {"last_frame", results.back().frame},
+                            {"readable_frames", s.readable},
+                            {"unreadable_frames", s.unreadable},
+                            {"empty_frames", s.empty},
+                            {"triangles", {{"min", s.tri_min}, {"mean", s.tri_mean}, {"max", s.tri_max}}},
+                            {"non_manifold_edges", s.non_manifold_edges},
+                            {"non_manifold_vertices", s.non_manifold_vertices},
+                            {"boundary_edges", s.boundary},
+                            {"degenerate_triangles", s.degenerate},
+                            {"isolated_vertices", s.isolated},
+                            {"bounds", box_json(s.bounds)},
+                            {"peak_speed", s.peak_speed},
+                            {"peak_speed_frame", s.peak_frame},
+                            {"frames_without_velocity", s.frames_without_velocity},
+                            {"frames_with_warnings", s.frames_with_warnings},
+                            {"warnings", all_warnings},
+                            {"min_speed", o.min_speed}};
+  if (s.mean_difference >= 0)
+    summary["grid_relative_difference"] = {{"mean", s.mean_difference}, {"worst", s.worst_difference},
+                                           {"worst_frame", s.worst_difference_frame}};
+  return {{"mesh_pattern", o.mesh_pattern}, {"velocity_vdb", o.vdb_pattern.empty() ? nlohmann::json(nullptr) : nlohmann::json(o.vdb_pattern)},
+          {"frames", std::move(frames)}, {"summary", std::move(summary)}};
+}
+
+}  // namespace
+
+std::string inspection_json(const InspectOptions& o, const std::vector<FrameInspection>& results,
+                            const InspectSummary& s) {
+  // Invalid UTF-8 in a path would make dump() throw: replaced instead.
+  return inspection_json_value(o, results, s).dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace lapflow

@@ -2,8 +2,6 @@
 // every frame (inspect_sequence, addons/inspect.hpp); this prints its
 // topology problems and the velocity each frame would be advected with, then
 // a one-screen summary or JSON.
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <exception>
 #include <optional>
@@ -41,16 +39,6 @@ std::string box_text(const Box3& b) {
                        b.hi.z);
   return fmt::format("({:.3f}, {:.3f}, {:.3f}) - ({:.3f}, {:.3f}, {:.3f}) m", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y,
                      b.hi.z);
-}
-
-nlohmann::json box_json(const Box3& b) {
-  if (b.empty()) return nullptr;
-  return {{"min", {b.lo.x, b.lo.y, b.lo.z}}, {"max", {b.hi.x, b.hi.y, b.hi.z}}};
-}
-
-nlohmann::json speed_json(const SpeedStats& s) {
-  if (!s.present) return nullptr;
-  return {{"min", s.min}, {"mean", s.mean}, {"max", s.max}};
 }
 
 /// Totals over the readable frames (serial, in frame order).
@@ -111,11 +99,6 @@ void print_summary(const InspectCommandOptions& o, const std::vector<FrameInspec
                        " (see the warnings): a bake refuses them unless --units-ok");
 }
 
-/// "file (frame N): problem", as an error names a frame.
-std::string warning_text(const FrameInspection& r, const std::string& problem) {
-  return InputError(r.file, problem, r.frame).what();
-}
-
 /// The units warnings on stderr, the first frames' in full: a sequence whose
 /// every frame is in millimetres must not bury the summary.
 void print_warnings(const std::vector<FrameInspection>& results) {
@@ -128,59 +111,9 @@ void print_warnings(const std::vector<FrameInspection>& results) {
       continue;
     }
     ++shown;
-    for (const std::string& w : r.warnings) warn("{}", warning_text(r, w));
+    for (const std::string& w : r.warnings) warn("{}", inspection_warning(r, w));
   }
   if (more > 0) warn("{} more frames have such warnings (--json lists them all)", more);
-}
-
-nlohmann::json to_json(const InspectCommandOptions& o, const std::vector<FrameInspection>& results, const InspectSummary& s) {
-  nlohmann::json frames = nlohmann::json::array(), all_warnings = nlohmann::json::array();
-  for (const FrameInspection& r : results)
-    for (const std::string& w : r.warnings) all_warnings.push_back(warning_text(r, w));
-  for (const FrameInspection& r : results) {
-    nlohmann::json f = {{"frame", r.frame}, {"file", r.file}};
-    if (r.error) {
-      f["error"] = r.error_text;
-    } else {
-      const MeshReport& m = r.report;
-      f.update({{"triangles", m.triangles}, {"vertices", m.vertices}, {"components", m.components},
-                {"non_manifold_edges", m.non_manifold_edges}, {"non_manifold_vertices", m.non_manifold_vertices},
-                {"boundary_edges", m.boundary_edges}, {"degenerate_triangles", m.degenerate_triangles},
-                {"isolated_vertices", m.isolated_vertices}, {"area", m.area}, {"bounds", box_json(m.bounds)},
-                {"empty", m.triangles == 0}, {"velocity_source", r.grid_speed.present ? "vdb" : (r.vertex_speed.present ? "vertex" : "none")},
-                {"speed", speed_json(used_speed(r))}, {"vertex_speed", speed_json(r.vertex_speed)},
-                {"warnings", r.warnings}});
-      if (r.grid_speed.present) {
-        f["grid"] = {{"name", r.grid_name}, {"speed", speed_json(r.grid_speed)}};
-        f["grid"]["relative_difference"] = r.grid_difference >= 0 ? nlohmann::json(r.grid_difference) : nlohmann::json(nullptr);
-      }
-    }
-    frames.push_back(std::move(f));
-  }
-  nlohmann::json summary = {{"frames", results.size()},
-                            {"first_frame", results.front().frame},
-                            {"last_frame", results.back().frame},
-                            {"readable_frames", s.readable},
-                            {"unreadable_frames", s.unreadable},
-                            {"empty_frames", s.empty},
-                            {"triangles", {{"min", s.tri_min}, {"mean", s.tri_mean}, {"max", s.tri_max}}},
-                            {"non_manifold_edges", s.non_manifold_edges},
-                            {"non_manifold_vertices", s.non_manifold_vertices},
-                            {"boundary_edges", s.boundary},
-                            {"degenerate_triangles", s.degenerate},
-                            {"isolated_vertices", s.isolated},
-                            {"bounds", box_json(s.bounds)},
-                            {"peak_speed", s.peak_speed},
-                            {"peak_speed_frame", s.peak_frame},
-                            {"frames_without_velocity", s.frames_without_velocity},
-                            {"frames_with_warnings", s.frames_with_warnings},
-                            {"warnings", all_warnings},
-                            {"min_speed", o.min_speed}};
-  if (s.mean_difference >= 0)
-    summary["grid_relative_difference"] = {{"mean", s.mean_difference}, {"worst", s.worst_difference},
-                                           {"worst_frame", s.worst_difference_frame}};
-  return {{"mesh_pattern", o.mesh_pattern}, {"velocity_vdb", o.vdb_pattern.empty() ? nlohmann::json(nullptr) : nlohmann::json(o.vdb_pattern)},
-          {"frames", std::move(frames)}, {"summary", std::move(summary)}};
 }
 
 void run_inspect(const InspectCommandOptions& o) {
@@ -195,8 +128,7 @@ void run_inspect(const InspectCommandOptions& o) {
 
   const InspectSummary s = summarize(results);
   if (o.json) {
-    // Invalid UTF-8 in a path would make dump() throw: replaced instead.
-    fmt::print("{}\n", to_json(o, results, s).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+    fmt::print("{}\n", inspection_json(o, results, s));
   } else {
     print_table(results, with_grid);
     print_summary(o, results, s);

@@ -73,4 +73,12 @@ struct InspectSummary {
 
 InspectSummary summarize(const std::vector<FrameInspection>& frames);
 
+/// "file (frame N): problem", as an error names a frame.
+std::string inspection_warning(const FrameInspection& r, const std::string& problem);
+
+/// `lapflow inspect --json`: the options, every frame and the summary as
+/// JSON text, indented by 2 (invalid UTF-8 in a path replaced).
+std::string inspection_json(const InspectOptions& options, const std::vector<FrameInspection>& results,
+                            const InspectSummary& summary);
+
 }  // namespace lapflow
