@@ -7,6 +7,8 @@
 #include <cmath>
 #include <filesystem>
 #include <numbers>
+#include <set>
+#include <sstream>
 #include <stdexcept>
 
 #include "lapflow/core/errors.hpp"
@@ -218,6 +220,63 @@ std::vector<int> preview_frames(const BakeManifest& bake, const std::optional<Fr
     throw InputError(bake.frames.empty() ? bake_manifest_path(bake.dir, bake.name) : bake.frame_file("obj", bake.frames[0]),
                      "missing: the bake has no frame on disk");
   return frames;
+}
+
+PreviewExtent preview_extent(const std::vector<BakeManifest>& bakes, const std::vector<int>& frames,
+                             std::size_t max_points) {
+  PreviewExtent extent;
+  for (const BakeManifest& b : bakes) {
+    const PreviewExtent e = preview_extent(b, frames, max_points / std::max<std::size_t>(1, bakes.size()));
+    if (!e.box.empty()) {
+      extent.box.extend(e.box.lo);
+      extent.box.extend(e.box.hi);
+    }
+    extent.points.insert(extent.points.end(), e.points.begin(), e.points.end());
+  }
+  return extent;
+}
+
+void require_compared_frames(const std::vector<BakeManifest>& bakes, const std::vector<int>& frames) {
+  for (std::size_t i = 1; i < bakes.size(); ++i)
+    for (int f : frames) {
+      const std::string obj = bakes[i].frame_file("obj", f);
+      std::error_code ec;
+      if (!fs::exists(obj, ec))
+        throw InputError(obj, "missing: the bake compared with " + bakes.front().dir + " has no frame " +
+                                  std::to_string(f), f);
+    }
+}
+
+std::vector<std::string> panel_labels(const std::vector<BakeManifest>& bakes) {
+  std::set<std::string> modes;
+  for (const BakeManifest& b : bakes) modes.insert(raster_mode_name(b.options.raster.mode));
+  std::vector<std::string> labels;
+  for (const BakeManifest& b : bakes)
+    labels.push_back(modes.size() == bakes.size() ? raster_mode_name(b.options.raster.mode)
+                                                  : fs::path(b.dir).filename().string());
+  return labels;
+}
+
+std::optional<Vec3> parse_up_axis(const std::string& text) {
+  static const std::pair<const char*, Vec3> named[] = {{"z", {0, 0, 1}},  {"+z", {0, 0, 1}}, {"y", {0, 1, 0}},
+                                                       {"+y", {0, 1, 0}}, {"x", {1, 0, 0}},  {"+x", {1, 0, 0}},
+                                                       {"-z", {0, 0, -1}}, {"-y", {0, -1, 0}}, {"-x", {-1, 0, 0}}};
+  for (const auto& [name, axis] : named)
+    if (text == name) return axis;
+  std::stringstream in(text);
+  std::string item;
+  std::vector<double> v;
+  while (std::getline(in, item, ',')) {
+    std::size_t used = 0;
+    try {
+      v.push_back(std::stod(item, &used));
+    } catch (const std::exception&) {
+      return std::nullopt;
+    }
+    if (used != item.size()) return std::nullopt;
+  }
+  if (v.size() != 3 || !std::isfinite(v[0] + v[1] + v[2]) || norm(Vec3{v[0], v[1], v[2]}) == 0) return std::nullopt;
+  return normalized(Vec3{v[0], v[1], v[2]});
 }
 
 }  // namespace lapflow

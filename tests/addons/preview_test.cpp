@@ -366,4 +366,24 @@ TEST(PreviewCameras, ATurntableKeepsItsLargestDistanceAndAFixedEyeOrbitsItsTarge
   for (const PreviewCamera& c : preview_cameras(points, f, 3)) EXPECT_EQ(c.eye.x, 2.0);
 }
 
+TEST(PreviewSetup, UpAxesByNameOrVectorAndPanelLabelsByModeElseFolder) {
+  EXPECT_EQ(*parse_up_axis("y"), (Vec3{0, 1, 0}));
+  EXPECT_EQ(*parse_up_axis("-x"), (Vec3{-1, 0, 0}));
+  const std::optional<Vec3> tilted = parse_up_axis("0,3,4");
+  ASSERT_TRUE(tilted);
+  EXPECT_NEAR(tilted->y, 0.6, 1e-12);
+  EXPECT_NEAR(tilted->z, 0.8, 1e-12);
+  for (const char* bad : {"w", "0,0,0", "1,0", "1,0,x", "1,0,2,3", "nan,0,1", ""})
+    EXPECT_FALSE(parse_up_axis(bad)) << bad;
+
+  BakeManifest a, b;
+  a.dir = "/shots/a_erosion";
+  b.dir = "/shots/b_blend";
+  a.options.raster.mode = RasterMode::Erosion;
+  b.options.raster.mode = RasterMode::Blend;
+  EXPECT_EQ(panel_labels({a, b}), (std::vector<std::string>{"erosion", "blend"}));
+  b.options.raster.mode = RasterMode::Erosion;
+  EXPECT_EQ(panel_labels({a, b}), (std::vector<std::string>{"a_erosion", "b_blend"}));
+}
+
 }  // namespace lapflow

@@ -2,7 +2,6 @@
 // bake or several side by side.
 #include <ctime>
 #include <filesystem>
-#include <set>
 #include <sstream>
 
 #include "cli_common.hpp"
@@ -16,8 +15,8 @@ namespace {
 namespace fs = std::filesystem;
 
 struct PreviewCli {
-  std::string dir, frames, out, camera, up = "z", labels;
-  std::vector<std::string> compare;
+  std::string dir, frames, out, camera, up = "z";
+  std::vector<std::string> compare, labels;
   bool turntable = false, no_video = false, no_labels = false, no_ground = false;
   int width = 0, height = 0, samples = 4, views = 48;
   double azimuth = -35, elevation = 28, fov = 30, bump = 0.05, fps = 0;
@@ -39,38 +38,6 @@ std::vector<double> parse_numbers(const std::string& text, const std::string& op
   return v;
 }
 
-Vec3 parse_up(const std::string& text) {
-  if (text == "z" || text == "+z") return {0, 0, 1};
-  if (text == "y" || text == "+y") return {0, 1, 0};
-  if (text == "x" || text == "+x") return {1, 0, 0};
-  if (text == "-z") return {0, 0, -1};
-  if (text == "-y") return {0, -1, 0};
-  if (text == "-x") return {-1, 0, 0};
-  const std::vector<double> v = parse_numbers(text, "--up");
-  if (v.size() != 3 || norm(Vec3{v[0], v[1], v[2]}) == 0)
-    throw UsageError("--up '" + text + "': expected x, y, z, -x, -y, -z or a vector X,Y,Z");
-  return normalized(Vec3{v[0], v[1], v[2]});
-}
-
-/// Panel label: the modes when they tell the bakes apart, else the folder names.
-std::vector<std::string> panel_labels(const std::vector<BakeManifest>& bakes, const std::string& given) {
-  std::vector<std::string> labels;
-  if (!given.empty()) {
-    std::stringstream in(given);
-    std::string item;
-    while (std::getline(in, item, ',')) labels.push_back(item);
-    if (labels.size() != bakes.size())
-      throw UsageError("--labels: " + std::to_string(labels.size()) + " labels for " + std::to_string(bakes.size()) +
-                       " bakes");
-    return labels;
-  }
-  std::set<std::string> modes;
-  for (const BakeManifest& b : bakes) modes.insert(raster_mode_name(b.options.raster.mode));
-  for (const BakeManifest& b : bakes)
-    labels.push_back(modes.size() == bakes.size() ? raster_mode_name(b.options.raster.mode) : fs::path(b.dir).filename().string());
-  return labels;
-}
-
 std::string frame_digits(int n) { return fmt::format("{:04d}", n); }
 
 void run_preview(PreviewCli& c) {
@@ -87,34 +54,22 @@ void run_preview(PreviewCli& c) {
   if (!missing.empty())
     warn("{}: {} of the bake's frames are not on disk (first: {}); previewing the {} that are", main.dir,
          missing.size(), missing.front(), frames.size());
-  for (std::size_t i = 1; i < bakes.size(); ++i)
-    for (int f : frames) {
-      const std::string obj = bakes[i].frame_file("obj", f);
-      std::error_code ec;
-      if (!fs::exists(obj, ec))
-        throw InputError(obj, "missing: the bake compared with " + main.dir + " has no frame " + std::to_string(f), f);
-    }
+  require_compared_frames(bakes, frames);
 
   PreviewOptions o;
   o.width = c.width > 0 ? c.width : (comparing ? 640 : 1280);
   o.height = c.height > 0 ? c.height : (comparing ? 480 : 720);
   o.samples = c.samples;
-  o.look.up = parse_up(c.up);
+  const std::optional<Vec3> up = parse_up_axis(c.up);
+  if (!up) throw UsageError("--up '" + c.up + "': expected x, y, z, -x, -y, -z or a vector X,Y,Z");
+  o.look.up = *up;
   o.look.bump = c.bump;
   o.look.ground = !c.no_ground;
 
   // One camera for the whole sequence: the bounding box of every frame of every bake.
   info("lapflow preview: {} frame{} of {} ({}){}", frames.size(), frames.size() == 1 ? "" : "s", main.name,
        main.dir, comparing ? fmt::format(", {} bakes side by side", bakes.size()) : "");
-  PreviewExtent extent;
-  for (const BakeManifest& b : bakes) {
-    const PreviewExtent e = preview_extent(b, frames, 200000 / bakes.size());
-    if (!e.box.empty()) {
-      extent.box.extend(e.box.lo);
-      extent.box.extend(e.box.hi);
-    }
-    extent.points.insert(extent.points.end(), e.points.begin(), e.points.end());
-  }
+  const PreviewExtent extent = preview_extent(bakes, frames);
   const Box3& bounds = extent.box;
   const double aspect = double(o.width) / o.height;
   std::optional<PreviewCamera> fixed;
@@ -148,7 +103,10 @@ void run_preview(PreviewCli& c) {
   fs::create_directories(out_dir, ec);
   if (ec) throw OutputError(out_dir + ": cannot create the output folder: " + ec.message());
 
-  const std::vector<std::string> labels = comparing ? panel_labels(bakes, c.labels) : std::vector<std::string>{};
+  const std::vector<std::string> labels = c.labels.empty() ? panel_labels(bakes) : c.labels;
+  if (comparing && labels.size() != bakes.size())
+    throw UsageError("--labels: " + std::to_string(labels.size()) + " labels for " + std::to_string(bakes.size()) +
+                     " bakes");
   const std::string font = default_label_font();
   const int label_size = std::max(12, o.height / 22);
   bool font_warned = false;
@@ -248,7 +206,8 @@ void add_preview_command(CLI::App& app) {
   cmd->add_option("--out", c.out, "Output folder (default: DIR/preview)");
   cmd->add_option("--compare", c.compare, "Other bakes of the same frames, side by side (DIR's panel first)")
       ->expected(1, -1);
-  cmd->add_option("--labels", c.labels, "Panel labels, comma-separated (default: the modes, or the folder names)");
+  cmd->add_option("--labels", c.labels, "Panel labels, comma-separated (default: the modes, or the folder names)")
+      ->delimiter(',');
   cmd->add_flag("--turntable", c.turntable,
                 "The camera orbits the scene once over the frames (or over --views views of a single frame)");
   cmd->add_option("--views", c.views, "Views of a single-frame turntable")->check(CLI::Range(2, 3600))

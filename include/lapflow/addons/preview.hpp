@@ -91,6 +91,10 @@ struct PreviewExtent {
 /// InputError naming a missing or malformed file.
 PreviewExtent preview_extent(const BakeManifest& bake, const std::vector<int>& frames,
                              std::size_t max_points = 200000);
+/// The extent of several bakes of the same frames, together (`lapflow
+/// preview --compare`): their boxes joined, `max_points` shared among them.
+PreviewExtent preview_extent(const std::vector<BakeManifest>& bakes, const std::vector<int>& frames,
+                             std::size_t max_points = 200000);
 
 /// A 3/4 elevated view of `points`: looking from `azimuth` degrees about `up`
 /// (0 = from the -Y side for a Z-up world, from +Z for Y-up) and `elevation`
@@ -149,6 +153,18 @@ Image side_by_side(const std::vector<Image>& panels, int gap = 0, const Vec3& ga
 /// `missing` receives the manifest's frames skipped for lack of files.
 std::vector<int> preview_frames(const BakeManifest& bake, const std::optional<FrameRange>& range,
                                 std::vector<int>* missing = nullptr);
+
+/// Checks that every bake compared with `bakes.front()` has the mesh of each
+/// of `frames`; throws InputError naming the first missing file.
+void require_compared_frames(const std::vector<BakeManifest>& bakes, const std::vector<int>& frames);
+
+/// The label of each bake's panel: the raster modes when they tell the bakes
+/// apart, else the folder names.
+std::vector<std::string> panel_labels(const std::vector<BakeManifest>& bakes);
+
+/// A world up axis from its name (z, +z, y, -y, x, ...) or a vector `X,Y,Z`,
+/// normalized; nullopt when the text is neither (or the vector is zero).
+std::optional<Vec3> parse_up_axis(const std::string& text);
 
 /// Encodes PNG pictures (in order, same size) into an H.264 MP4 (yuv420p,
 /// dimensions padded to even) with the `ffmpeg` program, written atomically.
