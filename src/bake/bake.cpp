@@ -22,6 +22,7 @@
 #include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/bake/render.hpp"
+#include "lapflow/bake/render_record.hpp"
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
@@ -136,24 +137,6 @@ void record_frame_stats(const Frame& frame, const RasterStats& tracking, const P
     st.coverage = t.chart_texels ? double(t.covered_texels) / double(t.chart_texels) : 1.0;
     st.seconds_raster = st.seconds_track;
   }
-}
-
-/// --out: created when missing, a writable folder, and rid of the temporary
-/// files that killed runs of this bake left there. Throws OutputError naming
-/// the folder.
-void prepare_output_folder(const BakeOptions& o) {
-  const std::string& dir = o.out_dir;
-  std::error_code ec;
-  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
-    throw OutputError(dir + ": the output folder (--out) is a file, not a folder");
-  fs::create_directories(dir, ec);
-  if (ec) throw OutputError(dir + ": cannot create the output folder (--out): " + ec.message());
-  // The effective user's rights (root passes permission bits, but not a
-  // read-only file system).
-  if (::faccessat(AT_FDCWD, dir.c_str(), W_OK | X_OK, AT_EACCESS) != 0)
-    throw OutputError(dir + ": cannot write in the output folder (--out): " +
-                      std::generic_category().message(errno));
-  remove_stale_temporaries(dir, bake_file_stem_patterns(o.name));
 }
 
 /// A SIGINT or SIGTERM asked to stop: the frame in hand has no file yet and
@@ -339,12 +322,31 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
   return t;
 }
 
+namespace detail {
+
+void prepare_output_folder(const BakeOptions& o) {
+  const std::string& dir = o.out_dir;
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    throw OutputError(dir + ": the output folder (--out) is a file, not a folder");
+  fs::create_directories(dir, ec);
+  if (ec) throw OutputError(dir + ": cannot create the output folder (--out): " + ec.message());
+  // The effective user's rights (root passes permission bits, but not a
+  // read-only file system).
+  if (::faccessat(AT_FDCWD, dir.c_str(), W_OK | X_OK, AT_EACCESS) != 0)
+    throw OutputError(dir + ": cannot write in the output folder (--out): " +
+                      std::generic_category().message(errno));
+  remove_stale_temporaries(dir, bake_file_stem_patterns(o.name));
+}
+
+}  // namespace detail
+
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
   const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
   const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
-  prepare_output_folder(o);
+  detail::prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
   BakeManifest manifest = make_bake_manifest(o, frames);
   manifest.feature_digest = exemplar_feature_digest(exemplar.feature);
@@ -358,6 +360,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   if (o.until_frame) std::erase_if(todo, [&](int f) { return f > *o.until_frame; });
   detail::FrameReader reader(o, todo);
   detail::FrameWriter writer(o, manifest, on_frame);
+  writer.set_exemplar_digest(exemplar_digest(exemplar));
   PatchSet patches;  // the state that carries over from frame to frame
   std::shared_ptr<const Frame> prev;
   if (resume.index >= 0 && !todo.empty()) {

@@ -17,7 +17,11 @@
 #include <optional>
 #include <stdexcept>
 
+#include "lapflow/bake/render.hpp"
+#include "lapflow/bake/render_record.hpp"
+#include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "lapflow/io/atomic_file.hpp"
 
 namespace lapflow {
@@ -435,6 +439,7 @@ const char* frame_status_name(FrameStatus s) {
   switch (s) {
     case FrameStatus::Rendered: return "rendered";
     case FrameStatus::Tracked: return "tracked";
+    case FrameStatus::Damaged: return "damaged";
     case FrameStatus::Failed: return "failed";
     case FrameStatus::Pending: return "pending";
   }
@@ -457,14 +462,53 @@ json read_farm_record(const std::string& dir, const std::string& name) {
 }
 
 /// The status of frame `f` of bake `m`; `record` (maybe null) adds what the farm's job logs say.
+/// "resolution 512, aov, exemplar 512636c0": what a rendered frame's record says.
+std::string made_with(const RenderRecord& record) {
+  const auto option = [&](const char* name) {
+    const auto at = record.options.find(name);
+    return at == record.options.end() ? std::string("?") : at->second;
+  };
+  return fmt::format("resolution {}{}, exemplar {}", option("resolution"), option("aov") == "true" ? ", aov" : "",
+                     record.exemplar_digest.substr(0, 8));
+}
+
+/// The status of frame `f` of bake `m`; `record` (maybe null) adds what the farm's job logs say.
 FarmFrameReport frame_report(const BakeManifest& m, const json& record, int f) {
-  FarmFrameReport r{f, FrameStatus::Pending, ""};
+  FarmFrameReport r{f, FrameStatus::Pending, "", ""};
   std::error_code ec;
-  const bool tracked = fs::exists(m.frame_file("state", f), ec);
-  r.status = fs::exists(m.frame_file("obj", f), ec) ? FrameStatus::Rendered
-             : tracked                                ? FrameStatus::Tracked
-                                                      : FrameStatus::Pending;
-  if (r.status == FrameStatus::Rendered || record.is_null()) return r;
+  const std::string state = m.frame_file("state", f);
+  const bool tracked = fs::exists(state, ec);
+  if (fs::exists(m.frame_file("obj", f), ec)) {
+    const std::string record_path = m.frame_file("render", f);
+    r.status = FrameStatus::Rendered;
+    if (!fs::exists(record_path, ec)) {
+      r.detail = "no record";
+      return r;
+    }
+    try {
+      const RenderRecord rendered = read_render_record(record_path);
+      if (rendered.name != m.name || rendered.frame != f)
+        throw InputError(record_path, fmt::format("the record of {} frame {}", rendered.name, rendered.frame));
+      r.detail = render_record_file_problem(m, rendered);
+      if (!r.detail.empty()) r.status = FrameStatus::Damaged;
+      else r.detail = made_with(rendered);
+    } catch (const InputError& e) {
+      r.status = FrameStatus::Damaged;
+      r.detail = e.what();
+    }
+    return r;
+  }
+  if (tracked) {
+    r.status = FrameStatus::Tracked;
+    try {
+      check_bake_state(read_bake_state(state), state, m, f);
+    } catch (const InputError& e) {
+      r.status = FrameStatus::Damaged;
+      r.detail = e.what();
+      return r;
+    }
+  }
+  if (record.is_null()) return r;
   for (const json& j : record["chunks"]) {
     FarmChunk ch;
     ch.first = j.value("first", 0);
@@ -477,14 +521,15 @@ FarmFrameReport frame_report(const BakeManifest& m, const json& record, int f) {
       if (const std::size_t at = log.rfind("%a"); at != std::string::npos)
         log.replace(at, 2, std::to_string(f - ch.first));
       const std::optional<int> code = logged_exit(log);
-      if (code && *code != 0) r = {f, FrameStatus::Failed, render_rerun(ch, f)};
+      if (code && *code != 0) r = {f, FrameStatus::Failed, render_rerun(ch, f), ""};
     } else {
       // The chain after a failed tracking job was cancelled: the whole farm command goes again.
       const std::optional<int> code = logged_exit(j.value("track_log", ""));
       if (code && *code != 0)
         r = {f, FrameStatus::Failed,
              "cd " + shell_quote(record.value("cwd", ".")) + " && " +
-                 shell_words(record["command"].get<std::vector<std::string>>())};
+                 shell_words(record["command"].get<std::vector<std::string>>()),
+             ""};
     }
   }
   return r;
@@ -508,10 +553,12 @@ FarmStatus farm_status(const std::string& dir, const std::string& name_in) {
   FarmStatus s;
   std::vector<FarmFrameReport>& frames = s.frames;
   std::map<FrameStatus, int>& counts = s.counts;
-  for (int f : m.frames) {
-    frames.push_back(frame_report(m, record, f));
-    ++counts[frames.back().status];
-  }
+  // Every state is read through (its CRC): frames on their own tasks.
+  frames.resize(m.frames.size());
+  parallel_for(m.frames.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) frames[i] = frame_report(m, record, m.frames[i]);
+  }, 1);
+  for (const FarmFrameReport& r : frames) ++counts[r.status];
   s.manifest = std::move(m);
   return s;
 }

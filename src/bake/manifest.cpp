@@ -71,7 +71,7 @@ std::string bake_state_file_pattern(const std::string& name) {
 std::vector<std::string> bake_file_stem_patterns(const std::string& name) {
   const std::string n = regex_escaped(name);
   // The kinds of frame_file() below, and the two files of the whole bake.
-  return {n + "\\.(color|disp|aov|patches|state)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
+  return {n + "\\.(color|disp|aov|patches|state|render)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
 }
 
 std::string bake_manifest_path(const std::string& dir, const std::string& name) {
@@ -88,6 +88,10 @@ std::string BakeManifest::frame_file(const std::string& kind, int frame) const {
     file = name + ".patches." + digits + ".ply";
   else if (kind == "state")
     file = name + ".state." + digits + ".bin";
+  else if (kind == "render")
+    file = name + ".render." + digits + ".json";
+  else if (kind == "lock")
+    file = "." + name + "." + digits + ".lock";
   else
     file = name + "." + kind + "." + digits + ".exr";
   return (fs::path(dir) / file).string();

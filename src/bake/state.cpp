@@ -5,10 +5,12 @@
 
 #include <bit>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <nlohmann/json.hpp>
 #include <type_traits>
+#include <vector>
 
 #include "core/json_number.hpp"
 #include "lapflow/core/errors.hpp"
@@ -102,6 +104,7 @@ std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches)
                            {"next_id", patches.next_id},
                            {"payload_bytes", e.bytes.size()},
                            {"stats", s.stats_line.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json::parse(s.stats_line)}};
+  if (s.mesh) header["mesh"] = {{"file", s.mesh->file}, {"bytes", s.mesh->bytes}, {"crc32", s.mesh->crc}};
   std::string bytes = header.dump() + "\n";
   bytes += e.bytes;
   const uint32_t crc = crc_of(bytes.data(), bytes.size());
@@ -111,6 +114,39 @@ std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches)
 
 void write_bake_state(const std::string& path, const std::string& bytes, StagedFiles* staged) {
   write_text_atomically(path, bytes, staged);
+}
+
+InputStamp stamp_input_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "cannot open the file");
+  InputStamp stamp;
+  stamp.file = std::filesystem::path(path).filename().string();
+  uLong crc = crc32(0, nullptr, 0);
+  std::vector<char> buffer(std::size_t(1) << 20);
+  while (in) {
+    in.read(buffer.data(), std::streamsize(buffer.size()));
+    const std::streamsize n = in.gcount();
+    if (n <= 0) break;
+    crc = crc32(crc, reinterpret_cast<const Bytef*>(buffer.data()), uInt(n));
+    stamp.bytes += uint64_t(n);
+  }
+  if (in.bad()) throw InputError(path, "cannot read the file");
+  stamp.crc = uint32_t(crc);
+  return stamp;
+}
+
+uint32_t bake_state_patches_crc(const std::string& bytes) {
+  const std::size_t newline = bytes.find('\n');
+  if (newline == std::string::npos || bytes.size() < newline + 1 + sizeof(uint32_t)) return 0;
+  return crc_of(bytes.data() + newline + 1, bytes.size() - newline - 1 - sizeof(uint32_t));
+}
+
+std::optional<uint32_t> bake_state_file_patches_crc(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return std::nullopt;
+  const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  if (in.bad()) return std::nullopt;
+  return bake_state_patches_crc(bytes);
 }
 
 BakeState read_bake_state(const std::string& path) {
@@ -148,6 +184,13 @@ BakeState parse_bake_state(const std::string& bytes, const std::string& path) {
     s.frame = whole_number<int>(header.at("frame"), "frame", path);
     s.options_checksum = whole_number<uint32_t>(header.at("options_checksum"), "options_checksum", path);
     if (!header.at("stats").is_null()) s.stats_line = header["stats"].dump();
+    if (header.contains("mesh")) {
+      const nlohmann::json& m = header.at("mesh");
+      if (!m.is_object() || !m.contains("file") || !m.at("file").is_string())
+        throw InputError(path, "bad state header: 'mesh' must be an object with a 'file' name");
+      s.mesh = InputStamp{m.at("file").get<std::string>(), whole_number<uint64_t>(m.value("bytes", nlohmann::json()), "mesh.bytes", path),
+                          whole_number<uint32_t>(m.value("crc32", nlohmann::json()), "mesh.crc32", path)};
+    }
     header_patches = whole_number<uint64_t>(header.at("patches"), "patches", path);
     header_next_id = whole_number<uint32_t>(header.at("next_id"), "next_id", path);
     const std::size_t payload = whole_number<std::size_t>(header.at("payload_bytes"), "payload_bytes", path);

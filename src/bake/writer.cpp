@@ -1,16 +1,21 @@
 #include "bake/writer.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <exception>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "lapflow/bake/render_record.hpp"
 #include "lapflow/bake/state.hpp"
+#include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/mesh_io.hpp"
 #include "lapflow/io/uv_mesh.hpp"
 
 namespace lapflow::detail {
@@ -61,6 +66,8 @@ struct FrameWriter::Job {
   std::shared_ptr<const Frame> surface;  ///< for the mesh
   PatchSet patches;                      ///< a copy, with dump_patches only
   std::string state;                     ///< NAME.state.N.bin's bytes, unless keep_states is 0
+  RenderRecord record;                   ///< NAME.render.N.json, without its files
+  std::optional<FileLock> lock;          ///< the frame's, held until its files are in place
 };
 
 FrameWriter::FrameWriter(const BakeOptions& options, const BakeManifest& names,
@@ -140,6 +147,7 @@ double FrameWriter::write_files(const Job& w) const {
     // One after the other on this thread (OpenEXR compresses on its own
     // pool): the writer must not take the TBB workers the next frame needs.
     for (const auto& job : jobs) job();
+    write_record(w, staged);
     staged.commit(obj);
     remove_old_state(f);
     return clock.lap();
@@ -159,10 +167,19 @@ double FrameWriter::write_files(const Job& w) const {
   }, 1);
   for (const auto& e : errors)
     if (e) std::rethrow_exception(e);  // `staged` removes the frame's temporary files
+  write_record(w, staged);
   // The OBJ is the frame's commit file: renamed last, after every other file.
   staged.commit(obj);
   remove_old_state(f);
   return clock.lap();
+}
+
+void FrameWriter::write_record(const Job& w, StagedFiles& staged) const {
+  RenderRecord record = w.record;
+  const std::string state = names_.frame_file("state", w.frame), patches = names_.frame_file("patches", w.frame);
+  for (const auto& [path, size] : staged.sizes())
+    if (path != state && path != patches) record.files.emplace_back(fs::path(path).filename().string(), size);
+  write_text_atomically(names_.frame_file("render", w.frame), encode_render_record(record), &staged);
 }
 
 void FrameWriter::remove_old_state(int frame) const {
@@ -176,9 +193,24 @@ void FrameWriter::remove_old_state(int frame) const {
   fs::remove(names_.frame_file("state", *(at - keep)), ec);
 }
 
-void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds) {
+void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds,
+                        std::optional<uint32_t> patches_crc, std::optional<FileLock> lock) {
   auto job = std::make_shared<Job>();
   job->frame = frame->number;
+  if (!options_.track_only) {
+    if (!lock) {
+      const std::string path = names_.frame_file("lock", frame->number);
+      auto taken = FileLock::try_take(path, "bake");
+      if (const LockOwner* owner = std::get_if<LockOwner>(&taken))
+        throw InputError(path, fmt::format("frame {} is being written by {} ({}): wait for it, or write into "
+                                           "another folder", frame->number, owner->describe(),
+                                           owner->purpose.empty() ? "lapflow" : owner->purpose));
+      lock = std::move(std::get<FileLock>(taken));
+    }
+    job->lock = std::move(lock);
+    job->record = make_render_record(options_, names_, frame->number, exemplar_digest_);
+    job->record.patches_crc = patches_crc;
+  }
   job->textures = std::move(frame->textures);
   if (!job->textures.color_half.bits.empty()) {
     // Made in half by the resolve (RasterOptions::half_images).
@@ -207,13 +239,19 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
     header.frame = frame->number;
     header.options_checksum = options_checksum_;
     header.stats_line = stats_line_without_timings(frame->stats);
+    header.mesh = stamp_input_file(FramePattern(options_.mesh_pattern).path(frame->number));
     job->state = encode_bake_state(header, patches);
+    if (!options_.track_only) job->record.patches_crc = bake_state_patches_crc(job->state);
     frame->stats.seconds_state = clock.lap();
   }
   finish();  // at most one frame in flight: bounds memory to two frames of images
   pending_stats_ = frame->stats;
   pending_compute_seconds_ = compute_seconds;
-  pending_ = std::async(std::launch::async, [this, job] { return write_files(*job); });
+  pending_ = std::async(std::launch::async, [this, job] {
+    const double seconds = write_files(*job);
+    job->lock.reset();  // the frame's files are in place
+    return seconds;
+  });
   if (!options_.background_write) finish();
 }
 

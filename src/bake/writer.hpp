@@ -10,6 +10,11 @@
 
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/io/file_lock.hpp"
+
+namespace lapflow {
+class StagedFiles;
+}
 
 namespace lapflow::detail {
 
@@ -25,7 +30,17 @@ class FrameWriter {
   /// frame took before writing. With BakeOptions::background_write the files
   /// are written while the caller goes on (at most one frame in flight);
   /// otherwise they are on disk when this returns.
-  void write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds);
+  ///
+  /// Unless tracking only, the frame's files include NAME.render.N.json
+  /// (render_record.hpp) and are written under the frame's lock
+  /// (.NAME.N.lock): `lock` when the caller holds it, else taken here
+  /// (InputError naming the lock file when another process holds it).
+  /// `patches_crc`: the patch state's, when the frame keeps no state of its
+  /// own (a render).
+  void write(const std::shared_ptr<Frame>& frame, const PatchSet& patches, double compute_seconds,
+             std::optional<uint32_t> patches_crc = {}, std::optional<FileLock> lock = {});
+  /// exemplar_digest() of the exemplar the frames are drawn with, for their records.
+  void set_exemplar_digest(std::string digest) { exemplar_digest_ = std::move(digest); }
   /// Waits for the frame in flight, if any; rethrows its write error.
   void finish();
   /// A resumed bake: NAME.stats.jsonl starts with these lines (the frames
@@ -40,6 +55,8 @@ class FrameWriter {
  private:
   struct Job;
   double write_files(const Job& job) const;
+  /// Stages NAME.render.N.json with the sizes of the files staged so far.
+  void write_record(const Job& job, StagedFiles& staged) const;
   /// Removes the state keep_states frames before `frame`.
   void remove_old_state(int frame) const;
 
@@ -52,7 +69,13 @@ class FrameWriter {
   double pending_compute_seconds_ = 0;
   std::optional<int> last_complete_frame_;
   uint32_t options_checksum_ = 0;
+  std::string exemplar_digest_;
   bool stats_file_ = true;
 };
+
+/// --out: created when missing, a writable folder, and rid of the temporary
+/// files that killed runs of this bake left there. Throws OutputError naming
+/// the folder.
+void prepare_output_folder(const BakeOptions& options);
 
 }  // namespace lapflow::detail

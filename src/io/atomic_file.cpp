@@ -115,6 +115,19 @@ void StagedFiles::write(const std::string& path, const std::function<void(const 
   entries_.push_back(std::move(e));
 }
 
+std::vector<std::pair<std::string, std::uintmax_t>> StagedFiles::sizes() {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<std::pair<std::string, std::uintmax_t>> out;
+  for (const Entry& e : entries_) {
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(e.tmp, ec);
+    if (ec) throw OutputError(e.tmp + ": cannot read the size of the file just written: " + ec.message());
+    out.emplace_back(e.path, size);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 void StagedFiles::commit(const std::string& last) {
   const std::lock_guard<std::mutex> lock(mutex_);
   // `last` is the group's commit file: it goes first (an old one must not

@@ -5,8 +5,15 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
+#include <thread>
+#include <variant>
 
 #include "io_test_helpers.hpp"
 #include "lapflow/addons/demo_scene.hpp"
@@ -14,8 +21,11 @@
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/bake/render.hpp"
+#include "lapflow/bake/render_record.hpp"
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/io/atomic_file.hpp"
+#include "lapflow/io/file_lock.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "test_helpers.hpp"
@@ -100,8 +110,8 @@ TEST_F(TrackRender, BakeIsTrackThenRender) {
       const std::string file = fmt::format("t.{}.{:04d}.exr", kind, f);
       EXPECT_TRUE(test::read_bytes(baked / file) == test::read_bytes(tracked / file)) << file;
     }
-    for (const std::string ext : {"obj", "mtl"}) {
-      const std::string file = fmt::format("t.{:04d}.{}", f, ext);
+    for (const std::string& file : {fmt::format("t.{:04d}.obj", f), fmt::format("t.{:04d}.mtl", f),
+                                   fmt::format("t.render.{:04d}.json", f)}) {
       EXPECT_TRUE(test::read_bytes(baked / file) == test::read_bytes(tracked / file)) << file;
     }
     const std::string state = fmt::format("t.state.{:04d}.bin", f);
@@ -175,7 +185,9 @@ TEST_F(TrackRender, RenderChecksItsInputs) {
   r.exemplar_displacement = ex + "lava.disp.png";
   EXPECT_EQ(input_error_of([&] { render(r); }), "") << "another colour over the tracked feature map renders";
   EXPECT_EQ(read_image_header(other / "t.color.0002.exr").width, 64);
-  EXPECT_EQ(read_bake_manifest(other.str()).options.atlas.resolution, 64);
+  EXPECT_EQ(read_render_record(other / "t.render.0002.json").options.at("resolution"), "64");
+  EXPECT_EQ(read_bake_manifest(other.str()).options.atlas.resolution, 128)
+      << "the folder's manifest, of this tracking, is not rewritten: each frame's record says what it is";
 
   r.exemplar_feature = ex + "lava.feature.png";
   const std::string feature = input_error_of([&] { render(r); });
@@ -194,4 +206,177 @@ TEST_F(TrackRender, RenderChecksItsInputs) {
     const std::string state = fmt::format("t.state.{:04d}.bin", f);
     test::expect_same_patches(read_bake_state(tracked / state).patches, read_bake_state(whole / state).patches);
   }
+}
+
+namespace {
+
+/// Frame `f`'s colour atlas width in `dir` (bake "t").
+int color_width(const TempDir& dir, int f) {
+  return read_image_header(dir / fmt::format("t.color.{:04d}.exr", f)).width;
+}
+
+}  // namespace
+
+// A tracked folder rendered at two resolutions: --skip-done trusts each
+// frame's record, not the manifest, renders again (saying why) what was made
+// otherwise or is not whole, and never rewrites the tracked manifest.
+TEST_F(TrackRender, SkipDoneTrustsEachFramesRecordNotTheManifest) {
+  TempDir tracked("track_records");
+  BakeOptions t = small_bake(meshes_->str(), tracked.str(), 128);
+  t.track_only = true;
+  bake(t);
+  const std::string manifest = test::read_bytes(tracked / "t.bake.json");
+  RenderOptions r;
+  r.dir = tracked.str();
+  render(r);
+  r.frames = FrameRange{2, 2};
+  r.resolution = 256;
+  render(r);
+  EXPECT_EQ(color_width(tracked, 1), 128);
+  EXPECT_EQ(color_width(tracked, 2), 256);
+
+  r.frames.reset();
+  r.skip_done = true;
+  std::vector<int> skipped, again;
+  std::map<int, std::string> reasons;
+  render(r, [&](const RenderedFrame& f) {
+    (f.skipped ? skipped : again).push_back(f.frame);
+    reasons[f.frame] = f.reason;
+  });
+  EXPECT_EQ(skipped, (std::vector<int>{2}));
+  EXPECT_EQ(again, (std::vector<int>{1, 3, 4}));
+  for (int f : {1, 3, 4}) {
+    EXPECT_EQ(reasons[f], "made with other options: resolution: 128 on disk, 256 asked") << f;
+    EXPECT_EQ(color_width(tracked, f), 256) << f;
+  }
+  EXPECT_EQ(test::read_bytes(tracked / "t.bake.json"), manifest) << "the tracking's manifest is never rewritten";
+  EXPECT_EQ(read_render_record(tracked / "t.render.0003.json").options.at("resolution"), "256");
+
+  // With --no-rerender, a frame made otherwise is an error naming its record; nothing is rewritten.
+  r.resolution = 128;
+  r.refuse_other_options = true;
+  const std::string refused = input_error_of([&] { render(r); });
+  EXPECT_NE(refused.find("t.render.0001.json: frame 1 is already there, made with other options: resolution: 256 on "
+                         "disk, 128 asked (--no-rerender) (and 3 more frames refused)"),
+            std::string::npos)
+      << refused;
+  for (int f = 1; f <= kFrames; ++f) EXPECT_EQ(color_width(tracked, f), 256) << f;
+
+  // A file cut short: that frame alone is rendered again.
+  const std::string color3 = tracked / "t.color.0003.exr";
+  const std::string bytes = test::read_bytes(color3);
+  test::write_bytes(color3, bytes.substr(0, bytes.size() / 2));
+  r.resolution = 256;
+  r.refuse_other_options = false;
+  skipped.clear(), again.clear(), reasons.clear();
+  render(r, [&](const RenderedFrame& f) {
+    (f.skipped ? skipped : again).push_back(f.frame);
+    reasons[f.frame] = f.reason;
+  });
+  EXPECT_EQ(again, (std::vector<int>{3}));
+  EXPECT_EQ(reasons[3], fmt::format("t.color.0003.exr has {} bytes, {} recorded", bytes.size() / 2, bytes.size()));
+  EXPECT_TRUE(test::read_bytes(color3) == bytes) << "the same options give the same bytes";
+}
+
+// Each frame is written under its lock: a render of the same options waits
+// for the frame another holds (and does it last), one of other options is
+// refused naming the lock, and a lock file its owner left behind is no lock.
+TEST_F(TrackRender, FramesAreWrittenUnderTheirLocks) {
+  TempDir tracked("track_locks");
+  BakeOptions t = small_bake(meshes_->str(), tracked.str(), 128);
+  t.track_only = true;
+  bake(t);
+  RenderOptions r;
+  r.dir = tracked.str();
+  r.frames = FrameRange{2, 2};
+  render(r);
+  const std::string purpose = render_lock_purpose(read_render_record(tracked / "t.render.0002.json"));
+  const std::string lock2 = tracked / ".t.0002.lock";
+
+  // Another render of the same options holds frame 2 for a while.
+  r.frames = FrameRange{1, 3};
+  std::vector<int> order;
+  {
+    auto held = FileLock::try_take(lock2, purpose);
+    ASSERT_TRUE(std::holds_alternative<FileLock>(held));
+    std::atomic<bool> released = false;
+    std::thread other([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(400));
+      released = true;
+      std::get<FileLock>(held).release();
+    });
+    render(r, [&](const RenderedFrame& f) {
+      order.push_back(f.frame);
+      if (f.frame == 2) {
+        EXPECT_TRUE(released) << "frame 2 waited for its lock";
+      }
+    });
+    other.join();
+  }
+  EXPECT_EQ(order, (std::vector<int>{1, 3, 2}));
+  EXPECT_FALSE(fs::exists(lock2)) << "a lock goes with its frame's files";
+
+  // A process with other options holds frame 2: refused, naming the lock and its owner.
+  {
+    auto held = FileLock::try_take(lock2, "render 0badf00d, resolution 64");
+    ASSERT_TRUE(std::holds_alternative<FileLock>(held));
+    order.clear();
+    const std::string refused = input_error_of([&] { render(r, [&](const RenderedFrame& f) { order.push_back(f.frame); }); });
+    EXPECT_NE(refused.find(lock2 + ": frame 2 is being written by pid " + std::to_string(::getpid())), std::string::npos)
+        << refused;
+    EXPECT_NE(refused.find("(render 0badf00d, resolution 64), with other options"), std::string::npos) << refused;
+    EXPECT_EQ(order, (std::vector<int>{1, 3})) << "the other frames are rendered";
+  }
+
+  // A lock file whose owner died (no process holds it): taken over.
+  test::write_bytes(lock2, "{\"pid\": 4194305, \"host\": \"gone\", \"purpose\": \"render 0badf00d\"}\n");
+  order.clear();
+  render(r, [&](const RenderedFrame& f) { order.push_back(f.frame); });
+  EXPECT_EQ(order, (std::vector<int>{1, 2, 3}));
+  EXPECT_FALSE(fs::exists(lock2));
+}
+
+// A render clears the temporary files killed runs left in its folder (not a
+// running process's), and refuses a frame whose mesh changed since it was
+// tracked unless told otherwise; a manifest edited into options that do not
+// hold is an input error naming it.
+TEST_F(TrackRender, RenderClearsStaleTemporariesAndRefusesAChangedMesh) {
+  TempDir meshes("track_changed_in"), tracked("track_changed");
+  for (int f = 1; f <= 3; ++f) {
+    const std::string name = fmt::format("m.{:04d}.ply", f);
+    test::write_bytes(meshes / name, test::read_bytes(*meshes_ / name));
+  }
+  BakeOptions t = small_bake(meshes.str(), tracked.str(), 64);
+  t.track_only = true;
+  t.frames = FrameRange{1, 3};
+  bake(t);
+  const std::string dead = tracked / fmt::format(".t.color.0001.tmp{}-4194305_0.exr", temporary_host_tag());
+  const std::string live = tracked / fmt::format(".t.color.0001.tmp{}-{}_9.exr", temporary_host_tag(), ::getpid());
+  test::write_bytes(dead, "half a file");
+  test::write_bytes(live, "being written");
+  test::write_bytes(meshes / "m.0003.ply", test::read_bytes(*meshes_ / "m.0002.ply"));
+  RenderOptions r;
+  r.dir = tracked.str();
+  std::vector<int> rendered;
+  const std::string changed = input_error_of([&] { render(r, [&](const RenderedFrame& f) { rendered.push_back(f.frame); }); });
+  EXPECT_FALSE(fs::exists(dead)) << "a dead process's temporary file is removed";
+  EXPECT_TRUE(fs::exists(live)) << "a running process's is not";
+  EXPECT_NE(changed.find(meshes / "m.0003.ply" + " (frame 3): changed since frame 3 was tracked"), std::string::npos)
+      << changed;
+  EXPECT_NE(changed.find("--allow-changed-input"), std::string::npos) << changed;
+  EXPECT_EQ(rendered, (std::vector<int>{1, 2}));
+  EXPECT_FALSE(fs::exists(tracked / "t.0003.obj"));
+  r.allow_changed_input = true;
+  EXPECT_EQ(input_error_of([&] { render(r); }), "");
+  EXPECT_TRUE(fs::exists(tracked / "t.0003.obj"));
+
+  // A tracking option edited in the manifest (a radius the options cannot keep).
+  std::string text = test::read_bytes(tracked / "t.bake.json");
+  const std::size_t at = text.find("\"radius\": ");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, text.find(',', at) - at, "\"radius\": 0.0");
+  test::write_bytes(tracked / "t.bake.json", text);
+  const std::string edited = input_error_of([&] { render(r); });
+  EXPECT_NE(edited.find(tracked / "t.bake.json: its tracking options do not hold as written (radius"), std::string::npos)
+      << edited;
 }

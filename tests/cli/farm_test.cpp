@@ -18,6 +18,8 @@
 
 #include "io_test_helpers.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/render_record.hpp"
+#include "lapflow/bake/state.hpp"
 
 using namespace lapflow;
 using lapflow::test::read_bytes;
@@ -316,12 +318,22 @@ void write_manifest(const std::string& dir, const std::string& name, int first, 
 
 void touch(const std::string& path) { write_bytes(path, "x"); }
 
+/// A state of frame `f` of the bake `name` in `dir` (its manifest written), with no patch.
+void write_state(const std::string& dir, const std::string& name, int f) {
+  const BakeManifest m = read_bake_manifest(dir, name);
+  BakeStateHeader h;
+  h.name = name;
+  h.frame = f;
+  h.options_checksum = bake_tracking_checksum(m);
+  write_bytes(m.frame_file("state", f), encode_bake_state(h, PatchSet{}));
+}
+
 }  // namespace
 
 TEST(FarmStatus, CountsRenderedTrackedAndPendingFramesFromTheFiles) {
   TempDir dir("farm_status");
   write_manifest(dir.str(), "t", 1, 6);
-  for (int f : {1, 2, 3, 4}) touch(dir / fmt::format("t.state.{:04d}.bin", f));
+  for (int f : {1, 2, 3, 4}) write_state(dir.str(), "t", f);
   for (int f : {1, 2}) touch(dir / fmt::format("t.{:04d}.obj", f));
   touch(dir / "t.0005.mtl");  // a frame is rendered when its OBJ is there, not before
 
@@ -339,7 +351,7 @@ TEST(FarmStatus, CountsRenderedTrackedAndPendingFramesFromTheFiles) {
 
   const Outcome text = lapflow_in(dir.str(), {"farm", "status", dir.str()});
   ASSERT_EQ(text.exit_code, 0) << text.err;
-  const std::vector<std::string> want = {"t in " + dir.str() + ": frames 1-6", "  rendered  1-2", "  tracked   3-4",
+  const std::vector<std::string> want = {"t in " + dir.str() + ": frames 1-6", "  rendered  1-2   no record", "  tracked   3-4",
                                          "  pending   5-6",
                                          "6 frames: 2 rendered, 2 tracked (not yet rendered), 0 failed, 2 pending"};
   EXPECT_EQ(lines_of(text.out), want);
@@ -356,7 +368,7 @@ TEST(FarmStatus, ReadsTheFarmsRecordBeforeTheManifestAndNamesTheFailedJobsRerun)
 
   // Tracked 1-6; frame 1 rendered, frame 2's task failed, 3's is still to come; 5-8's tracking failed at 7.
   write_manifest(baked, "m", 1, 10);
-  for (int f = 1; f <= 6; ++f) touch(baked + fmt::format("/m.state.{:04d}.bin", f));
+  for (int f = 1; f <= 6; ++f) write_state(baked, "m", f);
   touch(baked + "/m.0001.obj");
   write_bytes(s.farm("logs/render.0001-0004.1.log"), "lapflow farm: frame 2\nerror: boom\nlapflow farm: exit 2\n");
   write_bytes(s.farm("logs/render.0001-0004.2.log"), "lapflow farm: frame 3\n");
@@ -374,6 +386,55 @@ TEST(FarmStatus, ReadsTheFarmsRecordBeforeTheManifestAndNamesTheFailedJobsRerun)
   EXPECT_TRUE(contains(text.out, "  failed    2   re-run: sbatch --array=1 " + s.farm("render.0001-0004.sh") + "\n"))
       << text.out;
   EXPECT_TRUE(contains(text.out, "10 frames: 1 rendered, 4 tracked (not yet rendered), 3 failed, 2 pending\n"));
+}
+
+TEST(FarmStatus, DamagedStatesAndFramesAreReportedAsSuchAndRenderedOnesWithTheirOptions) {
+  TempDir dir("farm_status_damaged");
+  write_manifest(dir.str(), "t", 1, 5);
+  for (int f : {1, 2, 3, 4, 5}) write_state(dir.str(), "t", f);
+  // 1: rendered, whole; 2: rendered, its colour cut short; 3: an OBJ of an older lapflow (no record);
+  // 4: a state cut short; 5: a state of another bake.
+  const BakeManifest m = read_bake_manifest(dir.str(), "t");
+  for (int f : {1, 2}) {
+    write_bytes(m.frame_file("color", f), std::string(100, 'c'));
+    write_bytes(m.frame_file("obj", f), "v 0 0 0\n");
+    BakeOptions o = m.options;
+    o.atlas.resolution = 512;
+    RenderRecord r = make_render_record(o, m, f, "0123456789abcdef-x-y");
+    r.files = {{fs::path(m.frame_file("color", f)).filename().string(), 100},
+               {fs::path(m.frame_file("obj", f)).filename().string(), 8}};
+    write_bytes(m.frame_file("render", f), encode_render_record(r));
+  }
+  write_bytes(m.frame_file("color", 2), std::string(60, 'c'));
+  touch(m.frame_file("obj", 3));
+  const std::string state4 = read_bytes(m.frame_file("state", 4));
+  write_bytes(m.frame_file("state", 4), state4.substr(0, state4.size() - 3));
+  BakeStateHeader other;
+  other.name = "u";
+  other.frame = 5;
+  write_bytes(m.frame_file("state", 5), encode_bake_state(other, PatchSet{}));
+
+  const Outcome run = lapflow_in(dir.str(), {"farm", "status", dir.str(), "--json"});
+  ASSERT_EQ(run.exit_code, 0) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j["rendered"], 2);
+  EXPECT_EQ(j["damaged"], 3);
+  EXPECT_EQ(j["tracked"], 0);
+  const nlohmann::json& frames = j["frames"];
+  EXPECT_EQ(frames[0]["status"], "rendered");
+  EXPECT_EQ(frames[0]["made_with"], "resolution 512, exemplar 01234567");
+  EXPECT_EQ(frames[1]["status"], "damaged");
+  EXPECT_EQ(frames[1]["problem"], "t.color.0002.exr has 60 bytes, 100 recorded");
+  EXPECT_EQ(frames[2]["status"], "rendered");
+  EXPECT_EQ(frames[2]["made_with"], "no record");
+  EXPECT_EQ(frames[3]["status"], "damaged");
+  EXPECT_TRUE(contains(frames[3]["problem"].get<std::string>(), "t.state.0004.bin: damaged state")) << frames[3];
+  EXPECT_EQ(frames[4]["status"], "damaged");
+  EXPECT_TRUE(contains(frames[4]["problem"].get<std::string>(), "the state is of bake 'u' frame 5")) << frames[4];
+  const Outcome text = lapflow_in(dir.str(), {"farm", "status", dir.str()});
+  EXPECT_TRUE(contains(text.out, "  damaged   2   t.color.0002.exr has 60 bytes, 100 recorded\n")) << text.out;
+  EXPECT_TRUE(contains(text.out, "5 frames: 2 rendered, 0 tracked (not yet rendered), 3 damaged, 0 failed, 0 pending\n"))
+      << text.out;
 }
 
 TEST(FarmStatus, AFolderWithoutABakeIsExit2NamingIt) {

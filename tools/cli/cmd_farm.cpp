@@ -92,6 +92,7 @@ void run_status(const StatusCli& c) {
     for (const FarmFrameReport& r : frames) {
       json j = {{"frame", r.frame}, {"status", frame_status_name(r.status)}};
       if (!r.rerun.empty()) j["rerun"] = r.rerun;
+      if (!r.detail.empty()) j[r.status == FrameStatus::Damaged ? "problem" : "made_with"] = r.detail;
       list.push_back(j);
     }
     const json out = {{"dir", m.dir},
@@ -100,6 +101,7 @@ void run_status(const StatusCli& c) {
                       {"total", frames.size()},
                       {"rendered", count(FrameStatus::Rendered)},
                       {"tracked", count(FrameStatus::Tracked)},
+                      {"damaged", count(FrameStatus::Damaged)},
                       {"failed", count(FrameStatus::Failed)},
                       {"pending", count(FrameStatus::Pending)}};
     fmt::print("{}\n", out.dump(2, ' ', false, json::error_handler_t::replace));
@@ -111,17 +113,19 @@ void run_status(const StatusCli& c) {
   for (std::size_t i = 0; i < frames.size();) {
     std::size_t j = i + 1;
     while (j < frames.size() && frames[j].status == frames[i].status && frames[j].rerun == frames[i].rerun &&
-           frames[j].frame == frames[j - 1].frame + 1)
+           frames[j].detail == frames[i].detail && frames[j].frame == frames[j - 1].frame + 1)
       ++j;
     const std::string span =
         j - i == 1 ? std::to_string(frames[i].frame) : fmt::format("{}-{}", frames[i].frame, frames[j - 1].frame);
-    fmt::print("  {:<9} {}{}\n", frame_status_name(frames[i].status), span,
+    fmt::print("  {:<9} {}{}{}\n", frame_status_name(frames[i].status), span,
+               frames[i].detail.empty() ? "" : "   " + printable_line(frames[i].detail),
                frames[i].rerun.empty() ? "" : "   re-run: " + frames[i].rerun);
     i = j;
   }
-  fmt::print("{} frames: {} rendered, {} tracked (not yet rendered), {} failed, {} pending\n", frames.size(),
-             count(FrameStatus::Rendered), count(FrameStatus::Tracked), count(FrameStatus::Failed),
-             count(FrameStatus::Pending));
+  fmt::print("{} frames: {} rendered, {} tracked (not yet rendered), {}{} failed, {} pending\n", frames.size(),
+             count(FrameStatus::Rendered), count(FrameStatus::Tracked),
+             count(FrameStatus::Damaged) ? fmt::format("{} damaged, ", count(FrameStatus::Damaged)) : "",
+             count(FrameStatus::Failed), count(FrameStatus::Pending));
 }
 
 }  // namespace
@@ -178,8 +182,10 @@ void add_farm_command(CLI::App& app) {
 
   CLI::App* status = farm->add_subcommand("status", "Per-frame progress of a (farm) bake from the files on disk");
   status->description(
-      "Per-frame progress of a bake folder from its files: a frame is rendered when NAME.N.obj is there,\n"
-      "tracked when only its state NAME.state.N.bin is, failed when its job's log in OUT/farm/logs/ ends\n"
+      "Per-frame progress of a bake folder from its files: a frame is rendered when NAME.N.obj is there (with\n"
+      "what its NAME.render.N.json says it was made with), tracked when only its state NAME.state.N.bin is\n"
+      "and reads, damaged when its state does not read or a file its record lists is missing or of another\n"
+      "size, failed when its job's log in OUT/farm/logs/ ends\n"
       "with a non-zero exit code (with the sbatch command that re-runs it), pending otherwise. The frames\n"
       "come from NAME.bake.json, or from OUT/farm/farm.json before the first tracking job wrote it.\n"
       "A job killed by the scheduler (time limit, memory, scancel) logs no exit code: its frames stay\n"

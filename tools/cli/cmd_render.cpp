@@ -40,6 +40,7 @@ void run_render(RenderCli& c) {
     }
     ++rendered;
     seconds += f.stats.seconds_total;
+    if (!f.reason.empty()) info("frame {}: rendered again: {}", f.frame, f.reason);
     const FrameStats& s = f.stats;
     info("frame {}: {} tris, {} patches, {}x{} atlas, coverage {:.2f}% ({} texels closed by neighbours, {} forced), "
          "{:.2f}s",
@@ -62,7 +63,9 @@ void add_render_command(CLI::App& app) {
       "together, the OBJ last. Frames are independent: run any range anywhere, in any order, at once. No patch is\n"
       "born: holes finer than a tracking texel are closed by their neighbours (counted). The output options\n"
       "default to the manifest's; another --resolution gives the same patches, and another --exemplar with the\n"
-      "same feature map the same animation. Writes NAME.bake.json with the render's options into --out.\n\n"
+      "same feature map the same animation. Each frame's NAME.render.N.json records what it was made with; the\n"
+      "tracked NAME.bake.json is never rewritten (another --out gets a copy). A frame is written under its lock\n"
+      "(.NAME.N.lock): renders of the same options share a range, one with other options is refused.\n\n"
       "Exit codes: 0 ok, 2 bad input (the message names the file: a missing or damaged state, a feature map\n"
       "other than the tracked one), usage or output problem, 130 / 143 stopped by SIGINT / SIGTERM, 1 internal.");
   cmd->add_option("dir", c.o.dir, "The tracked folder (NAME.bake.json and NAME.state.N.bin)")->required();
@@ -80,9 +83,18 @@ void add_render_command(CLI::App& app) {
   add_table_flag(*cmd, "aov", [](const std::string& t) { c.aov = t == "true"; }, "(default: as the manifest says)");
   cmd->add_flag("--no-aov", c.no_aov, "Do not write NAME.aov.N.exr")->group("Output");
   cmd->add_flag("--skip-done", c.o.skip_done,
-                "Skip a frame whose OBJ is already in --out from a render with the same options, newer than its "
-                "state (a re-submitted farm job)")
+                "Skip a frame already in --out whose NAME.render.N.json says it was made from the same patches with "
+                "the same options and whose files are whole (a re-submitted farm job); render any other again, "
+                "saying why")
       ->group("Output");
+  cmd->add_flag("--no-rerender", c.o.refuse_other_options,
+                "With --skip-done: a frame already there made with other options is an error (exit 2), not "
+                "rendered again")
+      ->group("Output");
+  cmd->add_flag("--allow-changed-input", c.o.allow_changed_input,
+                "Render a frame whose mesh file changed since it was tracked (its size or CRC-32 is not its "
+                "state's); by default that is an error naming the mesh")
+      ->group("Input");
   add_max_memory_option(*cmd, c.o.max_memory, "The render's memory estimate must fit")->group("Limits");
   add_global_options(*cmd);
   cmd->callback([] { run_render(c); });

@@ -69,13 +69,21 @@ std::string track_rerun(const FarmChunk& chunk);
 std::string shell_quote(const std::string& s);
 std::string shell_words(const std::vector<std::string>& words);
 
-enum class FrameStatus { Rendered, Tracked, Failed, Pending };
+/// Rendered: NAME.N.obj is there, with the files its record lists; Tracked:
+/// only its state is, and it reads; Damaged: a state that does not read (or
+/// is another tracking's), a record that does not, or a file of the record
+/// missing or of another size; Failed: its farm job logged a non-zero exit.
+enum class FrameStatus { Rendered, Tracked, Damaged, Failed, Pending };
 const char* frame_status_name(FrameStatus s);
 
 struct FarmFrameReport {
   int frame = 0;
   FrameStatus status = FrameStatus::Pending;
-  std::string rerun;  ///< for a failed frame: the command that re-runs it
+  std::string rerun;    ///< for a failed frame: the command that re-runs it
+  /// For a rendered frame: what its record says it was made with
+  /// ("resolution 512, exemplar 512636c0", "no record" for a frame of an
+  /// older lapflow); for a damaged one: what is wrong.
+  std::string detail;
 };
 
 /// Per-frame progress of a bake folder from its files (`lapflow farm status`).

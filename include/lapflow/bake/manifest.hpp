@@ -26,7 +26,9 @@ struct BakeManifest {
   std::string feature_digest;
 
   /// Path of frame `frame`'s file of the given kind: "obj", "mtl", "color",
-  /// "disp", "aov", "patches", "state" (NAME.state.N.bin, bake/state.hpp).
+  /// "disp", "aov", "patches", "state" (NAME.state.N.bin, bake/state.hpp),
+  /// "render" (NAME.render.N.json, bake/render_record.hpp), "lock"
+  /// (.NAME.N.lock, held while a process writes the frame).
   std::string frame_file(const std::string& kind, int frame) const;
 };
 

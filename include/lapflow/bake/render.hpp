@@ -21,9 +21,17 @@ struct RenderOptions {
   std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< empty: the manifest's
   std::string out_dir;                    ///< empty: `dir`
   std::optional<bool> aov;                ///< the manifest's when empty
-  /// Skip a frame whose OBJ is already in out_dir from a render with the
-  /// same options (a re-submitted farm job).
+  /// Skip a frame already in out_dir whose record (NAME.render.N.json) says
+  /// it was made from the same patches with the same options and whose files
+  /// have their recorded sizes (a re-submitted farm job); render any other
+  /// again, saying why (RenderedFrame::reason).
   bool skip_done = false;
+  /// With skip_done: a frame there made with other options is an InputError
+  /// naming its record, not rendered again.
+  bool refuse_other_options = false;
+  /// Render a frame whose mesh file changed since it was tracked (its size
+  /// or CRC-32 differs from its state's stamp); else an InputError naming it.
+  bool allow_changed_input = false;
   std::size_t max_memory = 0;             ///< as BakeOptions::max_memory
 };
 
@@ -33,6 +41,9 @@ struct RenderedFrame {
   bool skipped = false;  ///< already there (RenderOptions::skip_done)
   int resolution = 0;    ///< the atlas's
   FrameStats stats;      ///< counts and seconds of a rendered frame
+  /// With skip_done, why a frame that was on disk was rendered again
+  /// ("made with other options: resolution: 256 on disk, 512 asked").
+  std::string reason;
 };
 
 struct BakeState;  // lapflow/bake/state.hpp
@@ -50,13 +61,19 @@ BakeOptions bake_options_from_manifest(const BakeManifest& manifest);
 
 /// Renders the frames of the tracked folder in `options.frames` whose state
 /// exists, writing NAME.N.obj + .mtl, NAME.color.N.exr, NAME.disp.N.exr (and
-/// NAME.aov.N.exr) into out_dir as `lapflow bake` would, each frame's files
-/// renamed into place together, the OBJ last; and NAME.bake.json there with
-/// the render's output options. Throws InputError naming the manifest, a
-/// state file (missing for a frame asked for: after the other frames are
-/// written; damaged; of another tracking) or the exemplar (its feature map
-/// differs from the tracked one), OutputError naming what cannot be
-/// written, Interrupted on SIGINT / SIGTERM between frames.
+/// NAME.aov.N.exr) and NAME.render.N.json into out_dir as `lapflow bake`
+/// would, each frame's files renamed into place together, the OBJ last.
+/// Each frame is written under its lock (.NAME.N.lock): a frame another
+/// render of the same options holds is done last, once that render let go
+/// of it; one held by a process with other options is refused. The tracked
+/// manifest is never rewritten; another out_dir gets NAME.bake.json when it
+/// has none of this tracking. Temporary files of killed runs in out_dir are
+/// removed first. Throws InputError naming the manifest, a state file
+/// (missing for a frame asked for: after the other frames are written;
+/// damaged; of another tracking), the exemplar (its feature map differs from
+/// the tracked one) or a refused frame's lock or record (after the other
+/// frames), OutputError naming what cannot be written, Interrupted on
+/// SIGINT / SIGTERM between frames.
 void render(const RenderOptions& options, const std::function<void(const RenderedFrame&)>& on_frame = {});
 
 }  // namespace lapflow

@@ -21,8 +21,11 @@ inline constexpr std::size_t kMaxMessageChars = 300;
 /// `text` as one printable line of at most `max_chars` bytes: trailing
 /// blanks dropped; control characters (a newline too) and bytes that are not
 /// valid UTF-8 escaped as \xHH, valid UTF-8 kept (a path or a unit such as
-/// m² stays readable); a longer line cut, ending in "... (N characters)",
-/// N the length of `text`. The CLI prints every error through it, whatever
+/// m² stays readable). A longer line first loses the middle of its longest
+/// paths ("/studio/.../shot/dam.0004.ply"), then, when that is not enough,
+/// the middle of the line (" ... (N characters) ... ", N the length of
+/// `text`): the start, which names the file, and the end, which says what is
+/// wrong, are kept. The CLI prints every error through it, whatever
 /// a library or an input file put in the message.
 std::string printable_line(std::string_view text, std::size_t max_chars = kMaxMessageChars);
 

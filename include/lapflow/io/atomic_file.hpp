@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lapflow/core/interrupt.hpp"
@@ -57,6 +58,9 @@ class StagedFiles {
 
   /// Removes the temporary files (also done by the destructor).
   void abandon();
+  /// The final path and the size in bytes of each file written so far, in
+  /// path order (a frame's record of its files, written before commit()).
+  std::vector<std::pair<std::string, std::uintmax_t>> sizes();
 
  private:
   struct Entry {
