@@ -31,6 +31,7 @@
 #include "lapflow/atlas/atlas.hpp"
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/render_record.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/core/parallel.hpp"
@@ -655,8 +656,25 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
                          const std::function<void(const FrameMetrics&)>& on_frame) {
   const BakeManifest m = read_bake_manifest(dir);
   const std::string folder = m.dir.empty() ? dir : m.dir;
-  if (!m.options.aov)
-    throw InputError(folder, "the bake has no AOVs (NAME.aov.N.exr): bake again with --aov to evaluate it");
+  // What the frames on disk were made with: the first frame's record (a
+  // tracked folder rendered anew), else the manifest.
+  std::optional<RenderRecord> rendered;
+  if (!m.frames.empty()) {
+    const int first = o.frames ? std::max(o.frames->first, m.frames.front()) : m.frames.front();
+    try {
+      if (std::error_code ec; fs::exists(m.frame_file("render", first), ec))
+        rendered = read_render_record(m.frame_file("render", first));
+    } catch (const InputError&) {
+      rendered.reset();  // damaged: the manifest says
+    }
+  }
+  const auto recorded = [&](const char* option) -> std::optional<std::string> {
+    if (!rendered || !rendered->options.contains(option)) return std::nullopt;
+    return rendered->options.at(option);
+  };
+  const bool aov = recorded("aov") ? *recorded("aov") == "true" : m.options.aov;
+  if (!aov)
+    throw InputError(folder, "the bake has no AOVs (NAME.aov.N.exr): bake (or render) again with --aov to evaluate it");
   if (!(m.options.patch.radius > 0)) throw InputError(bake_manifest_path(folder, m.name), "radius must be positive");
   if (!(m.options.fps > 0)) throw InputError(bake_manifest_path(folder, m.name), "fps must be positive");
   std::vector<int> frames;
@@ -671,8 +689,11 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   report.dir = folder;
   report.name = m.name;
   report.mode = raster_mode_name(m.options.raster.mode);
-  report.exemplar = o.exemplar.empty() ? m.options.exemplar_color : o.exemplar;
+  report.exemplar = !o.exemplar.empty()                              ? o.exemplar
+                    : rendered && !rendered->exemplar_color.empty() ? rendered->exemplar_color
+                                                                    : m.options.exemplar_color;
   report.resolution = m.options.atlas.resolution;
+  if (const auto res = recorded("resolution")) report.resolution = std::atoi(res->c_str());
   report.radius = m.options.patch.radius;
   report.fps = m.options.fps;
   report.rest_speed = o.min_speed ? *o.min_speed : m.options.min_speed;

@@ -4,7 +4,9 @@
 #include <fmt/format.h>
 #include <zlib.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -257,8 +259,11 @@ BakeManifest read_bake_manifest(const std::string& path_in, const std::string& n
       path = found.front();
     }
   }
+  errno = 0;
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "cannot open the bake manifest");
+  if (!in)
+    throw InputError(path.string(), std::string("cannot open the bake manifest") +
+                                        (errno != 0 ? std::string(": ") + std::strerror(errno) : std::string()));
   std::ostringstream text;
   text << in.rdbuf();
   return parse_bake_manifest(text.str(), path.string());

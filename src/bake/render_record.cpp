@@ -38,6 +38,14 @@ RenderRecord make_render_record(const BakeOptions& o, const BakeManifest& manife
   r.frame = frame;
   r.tracking_checksum = bake_tracking_checksum(manifest);
   r.exemplar_digest = digest;
+  const auto absolute = [](const std::string& p) {
+    std::error_code ec;
+    const fs::path a = p.empty() ? fs::path() : fs::absolute(p, ec);
+    return ec ? p : a.lexically_normal().string();
+  };
+  r.exemplar_color = absolute(o.exemplar_color);
+  r.exemplar_feature = absolute(o.exemplar_feature);
+  r.exemplar_displacement = absolute(o.exemplar_displacement);
   for (const BakeOption& option : bake_option_table())
     if (recorded(option)) r.options[option.name] = option.get(o);
   return r;
@@ -50,6 +58,9 @@ std::string encode_render_record(const RenderRecord& r) {
                               {"tracking_checksum", r.tracking_checksum}};
   if (r.patches_crc) j["patches_crc"] = *r.patches_crc;
   j["exemplar_digest"] = r.exemplar_digest;
+  j["exemplar"] = {{"color", r.exemplar_color},
+                   {"feature", r.exemplar_feature},
+                   {"displacement", r.exemplar_displacement}};
   nlohmann::ordered_json options = nlohmann::ordered_json::object(), files = nlohmann::ordered_json::object();
   for (const auto& [key, value] : r.options) options[key] = value;
   for (const auto& [file, size] : r.files) files[file] = size;
@@ -85,6 +96,16 @@ RenderRecord parse_render_record(const std::string& text, const std::string& pat
   r.tracking_checksum = whole_number<uint32_t>(need("tracking_checksum"), "tracking_checksum", path);
   if (j.contains("patches_crc")) r.patches_crc = whole_number<uint32_t>(j.at("patches_crc"), "patches_crc", path);
   r.exemplar_digest = text_of(need("exemplar_digest"), "exemplar_digest");
+  if (j.contains("exemplar")) {
+    const nlohmann::json& e = j.at("exemplar");
+    if (!e.is_object()) throw InputError(path, "'exemplar' must be an object");
+    const auto file = [&](const char* key) {
+      return e.contains(key) ? text_of(e.at(key), std::string("exemplar.") + key) : std::string();
+    };
+    r.exemplar_color = file("color");
+    r.exemplar_feature = file("feature");
+    r.exemplar_displacement = file("displacement");
+  }
   const nlohmann::json& options = need("options");
   const nlohmann::json& files = need("files");
   if (!options.is_object()) throw InputError(path, "'options' must be an object");

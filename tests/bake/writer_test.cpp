@@ -45,7 +45,7 @@ using test::stats_without_timings;
 using test::temporaries_in;
 
 const char* const kFrameFiles[] = {"t.{:04d}.obj", "t.{:04d}.mtl", "t.color.{:04d}.exr", "t.disp.{:04d}.exr",
-                                   "t.aov.{:04d}.exr", "t.patches.{:04d}.ply"};
+                                   "t.aov.{:04d}.exr", "t.patches.{:04d}.ply", "t.render.{:04d}.json"};
 
 }  // namespace
 

@@ -124,3 +124,17 @@ TEST(Cli, ABareLapflowListsEachCommandOnceAndExits0) {
     EXPECT_LE(end - at, 120u) << "not one short line: " << out.substr(at + 1, end - at - 1);
   }
 }
+
+// A studio path of 300 characters: the line loses the middle of the path,
+// not the reason at its end; a name too long for the file system says so.
+TEST(ErrorLine, ALongPathKeepsTheReasonAtTheEnd) {
+  TempDir dir("error_line");
+  std::string folder = dir.str();
+  for (int i = 0; folder.size() < 300; ++i) folder += fmt::format("/sequence_{:02d}", i);
+  const CliResult missing = run(dir, "render '" + folder + "/shot'");
+  expect_one_error_line(missing, {"/...", "/shot: cannot open the bake manifest: No such file or directory"});
+  EXPECT_TRUE(missing.err.ends_with("/shot: cannot open the bake manifest: No such file or directory\n"))
+      << missing.err;
+  const CliResult too_long = run(dir, "render " + std::string(300, 'a'));
+  expect_one_error_line(too_long, {"aaa: cannot open the bake manifest: File name too long"});
+}

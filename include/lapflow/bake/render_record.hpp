@@ -29,6 +29,10 @@ struct RenderRecord {
   std::optional<uint32_t> patches_crc;
   /// exemplar_digest() of the colour, feature and displacement maps used.
   std::string exemplar_digest;
+  /// Their files, absolute, as they were given (what `lapflow eval` compares
+  /// the frame with); not compared by render_record_differences: the digest
+  /// stands for them.
+  std::string exemplar_color, exemplar_feature, exemplar_displacement;
   /// Every picture option of the option table but the exemplar paths (the
   /// digest stands for them) and --dump-patches, by name, as the command
   /// line spells them: "resolution" -> "512", "compression" -> "rle".
