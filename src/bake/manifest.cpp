@@ -349,6 +349,12 @@ BakeManifest parse_bake_manifest(const std::string& text, const std::string& pat
     if (!settings.is_object()) throw InputError(path.string(), "'settings' must be an object");
     for (const BakeOption& option : bake_option_table())
       if (!option.manifest_key.empty()) read_option(j, settings, option, m.options, path.string());
+    // The values bake itself refuses (resolve_bake_options), named by key.
+    if (!(m.options.fps > 0)) throw InputError(path.string(), fmt::format("fps: {} is not positive", m.options.fps));
+    if (!(m.options.patch.radius >= 0))
+      throw InputError(path.string(), fmt::format("radius: {} is negative (0 = automatic)", m.options.patch.radius));
+    if (!(m.options.seeding.spacing > 0))
+      throw InputError(path.string(), fmt::format("settings.spacing: {} is not positive", m.options.seeding.spacing));
     if (settings.contains("feature_digest")) {
       if (!settings["feature_digest"].is_string())
         throw InputError(path.string(), "settings.feature_digest must be text");

@@ -7,6 +7,7 @@
 
 #include "io_test_helpers.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/render_record.hpp"
 #include "lapflow/bake/render.hpp"
 #include "lapflow/core/errors.hpp"
 
@@ -128,7 +129,13 @@ TEST(BakeManifest, FramesOutOfOrderAndANameWithAPathAreInputErrorsNamingTheKey) 
       {R"({"lapflow_bake": 1, "name": "a/b", "frames": [1]})", "name: 'a/b' is not a file name"},
       {R"({"lapflow_bake": 1, "name": "a\\b", "frames": [1]})", "is not a file name"},
       {R"({"lapflow_bake": 1, "name": "..", "frames": [1]})", "is not a file name"},
-      {R"({"lapflow_bake": 1, "name": "", "frames": [1]})", "is not a file name"}};
+      {R"({"lapflow_bake": 1, "name": "", "frames": [1]})", "is not a file name"},
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [1], "radius": -1})", "radius: -1 is negative"},
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [1], "fps": 0})", "fps: 0 is not positive"},
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [1], "delta_max": "x"})", "delta_max"},
+      {R"({"lapflow_bake": 1, "name": "m", "frames": [1], "settings": {"gutter": 3}})", "settings.gutter must be text"},
+      {R"({"lapflow_bake": 1, "frames": [1]})", "'name' must be text"},
+      {R"({"lapflow_bake": 1, "name": "m"})", "'frames' must be an array"}};
   for (const auto& [text, reason] : bad) {
     try {
       parse_bake_manifest(text, "m.bake.json");
@@ -140,6 +147,52 @@ TEST(BakeManifest, FramesOutOfOrderAndANameWithAPathAreInputErrorsNamingTheKey) 
   }
   EXPECT_EQ(parse_bake_manifest(R"({"lapflow_bake": 1, "name": "m", "frames": [1, 5, 9]})", "m.bake.json").frames,
             (std::vector<int>{1, 5, 9}));
+}
+
+TEST(RenderRecord, RoundTripsAndAProblemIsAnInputErrorNamingTheKey) {
+  RenderRecord r;
+  r.name = "shot";
+  r.frame = 7;
+  r.tracking_checksum = 4000000000u;
+  r.patches_crc = 12345u;
+  r.exemplar_digest = "a-b-c";
+  r.exemplar_color = "/maps/rock.color.png";
+  r.options = {{"resolution", "512"}, {"aov", "true"}};
+  r.files = {{"shot.0007.obj", 10}, {"shot.color.0007.exr", 5000000000u}};
+  const std::string text = encode_render_record(r);
+  const RenderRecord back = parse_render_record(text, "shot.render.0007.json");
+  EXPECT_EQ(encode_render_record(back), text);
+  EXPECT_TRUE(render_record_differences(back, r).empty());
+  RenderRecord other = r;
+  other.options["resolution"] = "256";
+  other.patches_crc = 1u;
+  EXPECT_EQ(render_record_differences(r, other),
+            (std::vector<std::string>{"the patches (the frame was tracked again since)",
+                                      "resolution: 512 on disk, 256 asked"}));
+  const std::vector<std::pair<std::string, std::string>> bad{
+      {"[1]", "not a lapflow render record"},
+      {R"({"lapflow_render": 2})", "render record version 2"},
+      {R"({"lapflow_render": 1, "name": "s", "frame": 1})", "'tracking_checksum' is missing"},
+      {R"({"lapflow_render": 1, "name": "s", "frame": 1.5})", "'frame' must be a whole number"},
+      {R"({"lapflow_render": 1, "name": "s", "frame": 1, "tracking_checksum": 1, "exemplar_digest": "d",
+           "options": {"resolution": 512}, "files": {}})",
+       "'options.resolution' must be a string"},
+      {R"({"lapflow_render": 1, "name": "s", "frame": 1, "tracking_checksum": 1, "exemplar_digest": "d",
+           "options": {}, "files": {"../x.exr": 1}})",
+       "files: '../x.exr' is not a file name"},
+      {R"({"lapflow_render": 1, "name": "s", "frame": 1, "tracking_checksum": 1, "exemplar_digest": "d",
+           "options": {}, "files": {"x.exr": -1}})",
+       "'files.x.exr' must be a whole number"},
+      {"{\"lapflow_render\": 1, \"na", "not JSON"}};
+  for (const auto& [bytes, reason] : bad) {
+    try {
+      parse_render_record(bytes, "s.render.0001.json");
+      ADD_FAILURE() << bytes << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "s.render.0001.json");
+      EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(BakeManifest, NumbersOutOfRangeAreAnInputErrorNotUndefinedBehaviour) {
