@@ -299,14 +299,17 @@ TEST_F(TrackRender, FramesAreWrittenUnderTheirLocks) {
   {
     auto held = FileLock::try_take(lock2, purpose);
     ASSERT_TRUE(std::holds_alternative<FileLock>(held));
-    std::atomic<bool> released = false;
+    // It lets go once this render has written frame 3 (or after a minute,
+    // should this render wait for it at once: then the order is wrong).
+    std::atomic<bool> third_written = false, released = false;
     std::thread other([&] {
-      std::this_thread::sleep_for(std::chrono::milliseconds(400));
+      for (int i = 0; i < 6000 && !third_written; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
       released = true;
       std::get<FileLock>(held).release();
     });
     render(r, [&](const RenderedFrame& f) {
       order.push_back(f.frame);
+      if (f.frame == 3) third_written = true;
       if (f.frame == 2) {
         EXPECT_TRUE(released) << "frame 2 waited for its lock";
       }
