@@ -2,7 +2,8 @@
 # Builds lapflow and its tests with AddressSanitizer and
 # UndefinedBehaviorSanitizer (RelWithDebInfo, in build-asan/) and runs the
 # unit tests once under them: every test but the long bakes of the shared
-# scenes (label shared_data_bake). Fails on any sanitizer report: UBSan
+# scenes (label shared_data_bake) and the longest multi-frame bakes whose
+# code shorter tests run too (label long_bake). Fails on any sanitizer report: UBSan
 # stops at its first finding, ASan always does, and LeakSanitizer reports
 # leaks when each test process exits. CI runs it after scripts/test.sh
 # (docs/robustness.md, "Sanitizers").
@@ -37,6 +38,6 @@ export UBSAN_OPTIONS="${UBSAN_OPTIONS:-halt_on_error=1:print_stacktrace=1}"
 export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$PWD/scripts/lsan.supp:print_suppressions=0}"
 start=$(date +%s)
 status=0
-ctest --test-dir build-asan --output-on-failure -j "$test_jobs" -LE shared_data_bake "$@" || status=$?
+ctest --test-dir build-asan --output-on-failure -j "$test_jobs" -LE "shared_data_bake|long_bake" "$@" || status=$?
 echo "sanitize.sh: the sanitized tests took $(( $(date +%s) - start )) s"
 exit "$status"
