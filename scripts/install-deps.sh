@@ -17,4 +17,5 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   libcli11-dev libfmt-dev libtomlplusplus-dev nlohmann-json3-dev \
   libgtest-dev libgmock-dev libstb-dev fonts-dejavu-core ffmpeg gnuplot-nox \
   clang libclang-rt-14-dev \
+  nodejs blender \
   >/dev/null

@@ -38,6 +38,6 @@ export UBSAN_OPTIONS="${UBSAN_OPTIONS:-halt_on_error=1:print_stacktrace=1}"
 export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$PWD/scripts/lsan.supp:print_suppressions=0}"
 start=$(date +%s)
 status=0
-ctest --test-dir build-asan --output-on-failure -j "$test_jobs" -LE "shared_data_bake|long_bake" "$@" || status=$?
+ctest --test-dir build-asan --output-on-failure -j "$test_jobs" -LE "shared_data_bake|long_bake|blender" "$@" || status=$?
 echo "sanitize.sh: the sanitized tests took $(( $(date +%s) - start )) s"
 exit "$status"

@@ -158,6 +158,9 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
   e.atlas = n2 * (kAtlasTexelBytes + (o.aov ? kAovTexelBytes : 0) + kUtilization * chart);
   // With background writing one more frame of images waits for the disk.
   if (o.background_write) e.atlas += n2 * (16 + 4 + (o.aov ? kAovTexelBytes : 0));
+  // --texture tiled: OpenImageIO's texture maker holds each atlas in float
+  // twice while it writes it (its level 0 and the image it filters from).
+  if (o.exr.layout == ExrLayout::TiledMipmap) e.atlas += n2 * 2 * (16 + 4);
 
   // The tracking atlas: its index and chart buffers, no image.
   const double nt = double(tracking_resolution(area, r, o.track_texel));

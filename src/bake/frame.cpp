@@ -76,9 +76,9 @@ std::unique_ptr<Frame> frame_from_input(FrameInput in) {
 
 }  // namespace
 
-std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame) {
+std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame, bool velocity_grid) {
   FrameSource meshes_only = source;
-  meshes_only.velocity_vdb_pattern.clear();
+  if (!velocity_grid) meshes_only.velocity_vdb_pattern.clear();
   meshes_only.allow_zero_velocity = true;
   return frame_from_input(read_frame_input(meshes_only, frame));
 }
@@ -102,6 +102,16 @@ std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame) {
   }
   if (source.min_speed > 0) f->velocity = with_min_speed(std::move(f->velocity), source.min_speed);
   return f;
+}
+
+std::vector<Vec3> surface_velocities(const Frame& frame) {
+  const TriMesh& m = frame.mesh;
+  if (!frame.velocity_grid) return m.velocities;  // empty when the mesh has none
+  std::vector<Vec3> v(m.vertex_count());
+  parallel_for(v.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) v[i] = frame.velocity_grid->sample(m.positions[i]);
+  }, 4096);
+  return v;
 }
 
 }  // namespace lapflow

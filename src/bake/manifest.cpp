@@ -73,7 +73,8 @@ std::string bake_state_file_pattern(const std::string& name) {
 std::vector<std::string> bake_file_stem_patterns(const std::string& name) {
   const std::string n = regex_escaped(name);
   // The kinds of frame_file() below, and the two files of the whole bake.
-  return {n + "\\.(color|disp|aov|patches|state|render)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake"};
+  return {n + "\\.(color|disp|aov|patches|state|render|usd)\\.[0-9]+", n + "\\.[0-9]+", n + "\\.stats", n + "\\.bake",
+          n, n + "\\.manifest"};
 }
 
 std::string bake_manifest_path(const std::string& dir, const std::string& name) {
@@ -94,8 +95,19 @@ std::string BakeManifest::frame_file(const std::string& kind, int frame) const {
     file = name + ".render." + digits + ".json";
   else if (kind == "lock")
     file = "." + name + "." + digits + ".lock";
+  else if (kind == "usd")
+    file = name + ".usd." + digits + ".usda";
   else
     file = name + "." + kind + "." + digits + ".exr";
+  return (fs::path(dir) / file).string();
+}
+
+std::string BakeManifest::shot_file(const std::string& kind) const {
+  std::string file;
+  if (kind == "usd") file = name + ".usda";
+  else if (kind == "usd-clips") file = name + ".manifest.usda";
+  else if (kind == "usd-lock") file = "." + name + ".usda.lock";
+  else throw std::invalid_argument("BakeManifest::shot_file: no kind " + kind);
   return (fs::path(dir) / file).string();
 }
 

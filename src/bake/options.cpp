@@ -306,6 +306,32 @@ std::vector<BakeOption> make_table() {
     o.absent = "false";
   }
   {
+    const Field<ExrLayout> f = [](BakeOptions& b) -> auto& { return b.exr.layout; };
+    BakeOption& o = in(t.choice<ExrLayout>("texture", f, {{"scanline", ExrLayout::Scanline}, {"tiled", ExrLayout::TiledMipmap}}),
+                       S::Output, E::Picture,
+                       "Layout of the colour and displacement EXRs: scanline, or tiled: tiled and mip-mapped as "
+                       "maketx makes them, which production renderers read without converting");
+    o.manifest_key = "settings/texture";
+    o.absent = "scanline";
+    o.example = "tiled";
+  }
+  {
+    BakeOption& o = in(t.flag("usd", [](BakeOptions& b) -> auto& { return b.usd; }), S::Output, E::Picture,
+                       "Also write each frame as a USD layer (NAME.usd.N.usda) and the shot's stage NAME.usda, "
+                       "which stitches them as value clips with the atlases as material");
+    o.negatable = true;
+    o.manifest_key = "usd";
+    o.absent = "false";
+  }
+  {
+    const Field<char> f = [](BakeOptions& b) -> auto& { return b.up_axis; };
+    BakeOption& o = in(t.choice<char>("up-axis", f, {{"z", 'Z'}, {"y", 'Y'}}), S::Output, E::Picture,
+                       "The USD stage's up axis: the simulation's (z: Blender, Mantaflow; y: Houdini, Maya)");
+    o.manifest_key = "settings/up_axis";
+    o.absent = "z";
+    o.example = "y";
+  }
+  {
     const Field<ExrPixelType> f = [](BakeOptions& b) -> auto& { return b.exr.type; };
     BakeOption& o = in(t.choice<ExrPixelType>("exr-type", f, {{"half", ExrPixelType::Half}, {"float", ExrPixelType::Float}}),
                        S::Output, E::Picture, "EXR pixel type of colour and displacement");

@@ -13,6 +13,7 @@
 #include <variant>
 
 #include "bake/writer.hpp"
+#include "lapflow/bake/options.hpp"
 #include "lapflow/bake/render_record.hpp"
 #include "lapflow/bake/state.hpp"
 #include "lapflow/io/file_lock.hpp"
@@ -72,6 +73,9 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
   }
   if (r.resolution > 0) o.atlas.resolution = r.resolution;
   if (r.aov) o.aov = *r.aov;
+  if (r.usd) o.usd = *r.usd;
+  if (!r.texture.empty()) set_bake_option(o, *find_bake_option("texture"), r.texture);
+  if (r.up_axis) o.up_axis = *r.up_axis;
   if (!r.out_dir.empty()) o.out_dir = r.out_dir;
   o.max_memory = r.max_memory;
   // The render keeps no state and dumps no patches.
@@ -214,7 +218,7 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
                                            f, now.bytes, now.crc, then.bytes, then.crc), f);
     }
     const PatchSet& patches = state.patches;
-    const std::shared_ptr<Frame> frame = load_frame_surface(source, f);
+    const std::shared_ptr<Frame> frame = load_frame_surface(source, f, o.usd);
     FrameStats& st = frame->stats;
     st.seconds_read = clock.lap();
     frame->atlas = build_surface_atlas(frame->mesh, o.atlas);
@@ -234,6 +238,7 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
     if (!render_one(f, true)) deferred.push_back(f);
   for (int f : deferred) render_one(f, false);
   writer.finish();
+  writer.write_usd_stage_file();  // also when every frame was skipped
   if (!refused.empty())
     throw InputError(refused.front().first,
                      refused.front().second + (refused.size() > 1

@@ -16,6 +16,7 @@
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/io/mesh_io.hpp"
+#include "lapflow/io/usd.hpp"
 #include "lapflow/io/uv_mesh.hpp"
 
 namespace lapflow::detail {
@@ -83,6 +84,7 @@ void FrameWriter::resume(std::string stats_lines, int last_frame) {
   stats_text_ = std::move(stats_lines);
   last_complete_frame_ = last_frame;
   note_complete_frame(last_frame);
+  write_usd_stage_file();
 }
 
 std::string FrameWriter::stats_line_without_timings(const FrameStats& stats) {
@@ -140,6 +142,11 @@ double FrameWriter::write_files(const Job& w) const {
     material.displacement_texture = fs::path(disp).filename().string();
     write_uv_mesh_obj(obj, w.surface->mesh, w.atlas, material, &staged);
   });
+  if (o.usd)
+    jobs.push_back([&] {
+      write_usd_frame_layer(names_.frame_file("usd", f), f, w.surface->mesh, w.atlas, surface_velocities(*w.surface),
+                            &staged);
+    });
   if (o.dump_patches) jobs.push_back([&] { write_patches_ply(names_.frame_file("patches", f), w.patches, &staged); });
   // The state goes into the same group: a frame with an OBJ has its state.
   if (!w.state.empty()) jobs.push_back([&] { write_bake_state(names_.frame_file("state", f), w.state, &staged); });
@@ -150,6 +157,7 @@ double FrameWriter::write_files(const Job& w) const {
     write_record(w, staged);
     staged.commit(obj);
     remove_old_state(f);
+    write_usd_stage_file();
     return clock.lap();
   }
   // Nothing else runs: the files are written concurrently (OIIO converts
@@ -171,7 +179,36 @@ double FrameWriter::write_files(const Job& w) const {
   // The OBJ is the frame's commit file: renamed last, after every other file.
   staged.commit(obj);
   remove_old_state(f);
+  write_usd_stage_file();
   return clock.lap();
+}
+
+void FrameWriter::write_usd_stage_file() const {
+  const BakeOptions& o = options_;
+  if (!o.usd || o.track_only) return;
+  // Several processes of a render write frames into one folder: each
+  // rewrites the stage under its lock from what is on disk, so the last one
+  // names every frame.
+  const std::string lock_path = names_.shot_file("usd-lock");
+  auto taken = FileLock::take_within(lock_path, "usd stage", std::chrono::seconds(60));
+  if (const LockOwner* owner = std::get_if<LockOwner>(&taken))
+    throw OutputError(lock_path + ": the USD stage stays locked by " + owner->describe());
+  UsdStage stage;
+  stage.name = o.name;
+  stage.fps = o.fps;
+  stage.up_axis = o.up_axis;
+  stage.displacement_scale = 0.1 * o.patch.radius;
+  stage.clip_manifest = fs::path(names_.shot_file("usd-clips")).filename().string();
+  std::error_code ec;
+  for (int f : names_.frames) {
+    const std::string layer = names_.frame_file("usd", f);
+    if (!fs::exists(layer, ec) || !fs::exists(names_.frame_file("obj", f), ec)) continue;
+    auto file = [&](const char* kind) { return fs::path(names_.frame_file(kind, f)).filename().string(); };
+    stage.frames.push_back({f, file("usd"), file("color"), file("disp")});
+  }
+  if (stage.frames.empty()) return;
+  write_usd_clip_manifest(names_.shot_file("usd-clips"));
+  write_usd_stage(names_.shot_file("usd"), stage);
 }
 
 void FrameWriter::write_record(const Job& w, StagedFiles& staged) const {

@@ -41,6 +41,9 @@ class FrameWriter {
              std::optional<uint32_t> patches_crc = {}, std::optional<FileLock> lock = {});
   /// exemplar_digest() of the exemplar the frames are drawn with, for their records.
   void set_exemplar_digest(std::string digest) { exemplar_digest_ = std::move(digest); }
+  /// With BakeOptions::usd: rewrites NAME.usda (and its clip manifest) to
+  /// name every frame of the bake whose USD layer and OBJ are on disk.
+  void write_usd_stage_file() const;
   /// Waits for the frame in flight, if any; rethrows its write error.
   void finish();
   /// A resumed bake: NAME.stats.jsonl starts with these lines (the frames

@@ -13,6 +13,7 @@
 #include <iterator>
 #include <nlohmann/json.hpp>
 #include <system_error>
+#include <thread>
 
 #include "lapflow/core/errors.hpp"
 
@@ -82,6 +83,16 @@ std::variant<FileLock, LockOwner> FileLock::try_take(const std::string& path, co
       throw OutputError(path + ": cannot write the lock file: " + std::strerror(error));
     }
     return FileLock(path, fd);
+  }
+}
+
+std::variant<FileLock, LockOwner> FileLock::take_within(const std::string& path, const std::string& purpose,
+                                                        std::chrono::milliseconds patience) {
+  const auto until = std::chrono::steady_clock::now() + patience;
+  for (;;) {
+    auto taken = try_take(path, purpose);
+    if (std::holds_alternative<FileLock>(taken) || std::chrono::steady_clock::now() >= until) return taken;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
 }
 

@@ -3,6 +3,7 @@
 #include <Imath/half.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 #include <immintrin.h>
 #include <unistd.h>
@@ -352,7 +353,12 @@ std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
 ImageHeader read_image_header(const std::string& path) {
   const auto in = open_image(path);
   const OIIO::ImageSpec& spec = in->spec();
-  return {spec.width, spec.height, spec.nchannels};
+  ImageHeader h{spec.width, spec.height, spec.nchannels};
+  h.tile_width = spec.tile_width;
+  h.tile_height = spec.tile_height;
+  // Each MIP level's header is known without reading a pixel.
+  while (in->seek_subimage(0, h.mip_levels)) ++h.mip_levels;
+  return h;
 }
 
 Image read_image(const std::string& path, ColorSpace space, std::size_t max_bytes) {
@@ -483,6 +489,118 @@ OIIO::ImageSpec exr_spec(const std::string& path, int width, int height, int cha
   return spec;
 }
 
+// Whether the channels are colour: R, G, B with or without A.
+bool colour_channels(const std::vector<std::string>& names) {
+  return names == std::vector<std::string>{"R", "G", "B"} || names == std::vector<std::string>{"R", "G", "B", "A"};
+}
+
+// OIIO's text about a failed texture names its own temporary file,
+// TMPSTEM.XXXXXXXX.temp.EXT beside ours (TMPSTEM.EXT): both become the
+// file's own name.
+std::string texture_failure_text(std::string text, const std::string& path, const std::string& tmp) {
+  const std::string name = std::filesystem::path(path).filename().string();
+  const std::string ext = std::filesystem::path(tmp).extension().string();
+  const std::string stem = tmp.substr(0, tmp.size() - ext.size());
+  const std::string inner_tail = ".temp" + ext;
+  for (std::size_t at = 0; (at = text.find(stem, at)) != std::string::npos;) {
+    std::size_t end = at + stem.size();
+    if (end + 9 + inner_tail.size() <= text.size() && text[end] == '.' &&
+        text.compare(end + 9, inner_tail.size(), inner_tail) == 0)
+      end += 9 + inner_tail.size();  // OIIO's: TMPSTEM.XXXXXXXX.temp.EXT
+    else if (text.compare(end, ext.size(), ext) == 0)
+      end += ext.size();  // ours
+    text.replace(at, end - at, name);
+    at += name.size();
+  }
+  return text;
+}
+
+// Writes a float image (`pixels`, spec's size and channels) as a tiled,
+// MIP-mapped OpenEXR texture in spec.format (half or float) to tmp, with
+// OIIO's make_texture (ExrLayout::TiledMipmap). make_texture works in
+// float: given float pixels, it takes them as level 0 (no copy; it only
+// reads them), where it would copy any other type to float itself, on one
+// thread.
+void write_texture(const std::string& path, const std::string& tmp, const OIIO::ImageSpec& spec, const float* pixels,
+                   ExrContent content) {
+  OIIO::ImageSpec float_spec = spec;
+  float_spec.set_format(OIIO::TypeDesc::FLOAT);
+  const OIIO::ImageBuf src(float_spec, const_cast<float*>(pixels));
+  OIIO::ImageSpec config;
+  config.format = spec.format;
+  config.tile_width = 64;
+  config.tile_height = 64;
+  config.tile_depth = 1;
+  // Attributes in `config` override make_texture's own: compression (it
+  // would use zip), the date (it stamps the time unless given one; one that
+  // is not a string is dropped when the header is written, as exr_spec's).
+  config.attribute("compression", spec.get_string_attribute("compression"));
+  config.attribute("DateTime", 0);
+  config.attribute("wrapmodes", "clamp,clamp");
+  if (content == ExrContent::Auto) content = colour_channels(spec.channelnames) ? ExrContent::Color : ExrContent::Data;
+  config.attribute("colorInteropID", content == ExrContent::Color ? "lin_rec709_scene" : "data");
+  // Instructions (never written to the file).
+  config.attribute("maketx:fileformatname", "openexr");
+  config.attribute("maketx:filtername", "box");
+  config.attribute("maketx:resize", 0);
+  config.attribute("maketx:nomipmap", 0);
+  config.attribute("maketx:constant_color_detect", 0);
+  config.attribute("maketx:opaque_detect", 0);
+  config.attribute("maketx:monochrome_detect", 0);
+  // The average colour is a sum over threads merged in the order they
+  // finish: its last digits would change from one write to the next.
+  config.attribute("maketx:compute_average", 0);
+  // No SHA-1 of the pixels: OIIO's texture cache uses it only to share
+  // identical files (no two frames' atlases are), and it costs a second
+  // pass over level 0.
+  config.attribute("maketx:hash", 0);
+  // make_texture runs on OIIO's own pool (OpenEXR on its own, exr_threads):
+  // lapflow's thread count, as for every other step.
+  if (int threads = 0; !OIIO::getattribute("threads", threads) || threads != thread_count())
+    OIIO::attribute("threads", thread_count());
+  OIIO::geterror();  // nothing left from an earlier call
+  if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, src, tmp, config))
+    throw write_failure(path, tmp, texture_failure_text(one_line(OIIO::geterror()), path, tmp));
+}
+
+}  // namespace
+
+namespace {
+
+// Half bits to float, eight at a time with F16C where the CPU has it
+// (exact: every half is a float).
+__attribute__((target("avx,f16c"))) void to_float_f16c(const uint16_t* in, float* out, std::size_t n) {
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    _mm256_storeu_ps(out + i, _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(in + i))));
+  for (Imath::half h; i < n; ++i) {
+    h.setBits(in[i]);
+    out[i] = float(h);
+  }
+}
+
+void to_float_portable(const uint16_t* in, float* out, std::size_t n) {
+  for (Imath::half h; n-- > 0;) {
+    h.setBits(*in++);
+    *out++ = float(h);
+  }
+}
+
+// A HalfImage's pixels in float, converted on all threads into memory that
+// is not zeroed first (a 6144^2 RGBA atlas: 600 MB, whose first touch is
+// what costs; each thread touches its own part).
+std::unique_ptr<float[]> to_float(const std::vector<uint16_t>& bits) {
+  static const bool f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+  std::unique_ptr<float[]> out(new float[bits.size()]);
+  parallel_for(bits.size(), [&](std::size_t b, std::size_t e) {
+    if (f16c)
+      to_float_f16c(bits.data() + b, out.get() + b, e - b);
+    else
+      to_float_portable(bits.data() + b, out.get() + b, e - b);
+  }, 1 << 16);
+  return out;
+}
+
 }  // namespace
 
 HalfImage to_half_image(const Image& img) {
@@ -499,6 +617,12 @@ void write_exr(const std::string& path, const HalfImage& img, const std::vector<
     throw OutputError(path + ": cannot write an empty or inconsistent image");
   const OIIO::ImageSpec spec =
       exr_spec(path, img.width, img.height, img.channels, channel_names, ExrPixelType::Half, options.compression);
+  if (options.layout == ExrLayout::TiledMipmap) {
+    const std::unique_ptr<float[]> pixels = to_float(img.bits);
+    write_atomically(path, [&](const std::string& tmp) { write_texture(path, tmp, spec, pixels.get(), options.content); },
+                     staged);
+    return;
+  }
   write_atomically(path, [&](const std::string& tmp) {
     write_oiio(path, tmp, spec, OIIO::TypeDesc::HALF, img.bits.data());
   }, staged);
@@ -507,6 +631,8 @@ void write_exr(const std::string& path, const HalfImage& img, const std::vector<
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
                const ExrOptions& options, StagedFiles* staged) {
   check_channels(path, img);
+  // Half: converted first, whatever the layout (a texture's MIP levels are
+  // then made from the half values level 0 holds, as from a HalfImage).
   if (options.type == ExrPixelType::Half) {
     write_exr(path, to_half_image(img), channel_names, options, staged);
     return;
@@ -514,7 +640,10 @@ void write_exr(const std::string& path, const Image& img, const std::vector<std:
   const OIIO::ImageSpec spec =
       exr_spec(path, img.width, img.height, img.channels, channel_names, options.type, options.compression);
   write_atomically(path, [&](const std::string& tmp) {
-    write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
+    if (options.layout == ExrLayout::TiledMipmap)
+      write_texture(path, tmp, spec, img.pixels.data(), options.content);
+    else
+      write_oiio(path, tmp, spec, OIIO::TypeDesc::FLOAT, img.pixels.data());
   }, staged);
 }
 

@@ -15,21 +15,10 @@ std::string uv_mesh_mtl_path(const std::string& obj_path) {
   return std::filesystem::path(obj_path).replace_extension(".mtl").string();
 }
 
-void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const SurfaceAtlas& atlas,
-                       const UvMeshMaterial& material, StagedFiles* staged) {
+UvMeshCorners uv_mesh_corners(const TriMesh& mesh, const SurfaceAtlas& atlas) {
   const std::size_t nt = mesh.triangle_count();
   if (atlas.corner_uv.size() != 3 * nt || atlas.chart_of_triangle.size() != nt)
-    throw std::invalid_argument("write_uv_mesh_obj: the atlas was built for another mesh");
-  const std::string mtl_path = uv_mesh_mtl_path(obj_path);
-
-  fmt::memory_buffer mtl;
-  fmt::format_to(std::back_inserter(mtl), "# lapflow atlas material\nnewmtl {}\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n",
-                 material.name);
-  if (!material.color_texture.empty()) fmt::format_to(std::back_inserter(mtl), "map_Kd {}\n", material.color_texture);
-  if (!material.displacement_texture.empty())
-    fmt::format_to(std::back_inserter(mtl), "disp {}\nmap_disp {}\n", material.displacement_texture,
-                   material.displacement_texture);
-
+    throw std::invalid_argument("uv_mesh_corners: the atlas was built for another mesh");
   // One vt per distinct (vertex, chart, uv): corners of one vertex inside one
   // chart share it (a collapsed degenerate triangle may differ).
   std::vector<uint32_t> order(3 * nt);
@@ -45,8 +34,10 @@ void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const S
     return a < b;
   };
   std::sort(order.begin(), order.end(), key_less);
-  std::vector<uint32_t> vt_of_corner(3 * nt);
-  std::vector<uint32_t> vt_corner;  // a representative corner per vt
+  UvMeshCorners out;
+  std::vector<uint32_t>& vt_of_corner = out.uv_of_corner;
+  vt_of_corner.resize(3 * nt);
+  std::vector<uint32_t>& vt_corner = out.corner_of_uv;
   for (std::size_t i = 0; i < order.size(); ++i) {
     const uint32_t c = order[i];
     if (i > 0) {
@@ -60,6 +51,27 @@ void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const S
     vt_of_corner[c] = uint32_t(vt_corner.size());
     vt_corner.push_back(c);
   }
+  return out;
+}
+
+void write_uv_mesh_obj(const std::string& obj_path, const TriMesh& mesh, const SurfaceAtlas& atlas,
+                       const UvMeshMaterial& material, StagedFiles* staged) {
+  const std::size_t nt = mesh.triangle_count();
+  if (atlas.corner_uv.size() != 3 * nt || atlas.chart_of_triangle.size() != nt)
+    throw std::invalid_argument("write_uv_mesh_obj: the atlas was built for another mesh");
+  const std::string mtl_path = uv_mesh_mtl_path(obj_path);
+
+  fmt::memory_buffer mtl;
+  fmt::format_to(std::back_inserter(mtl), "# lapflow atlas material\nnewmtl {}\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n",
+                 material.name);
+  if (!material.color_texture.empty()) fmt::format_to(std::back_inserter(mtl), "map_Kd {}\n", material.color_texture);
+  if (!material.displacement_texture.empty())
+    fmt::format_to(std::back_inserter(mtl), "disp {}\nmap_disp {}\n", material.displacement_texture,
+                   material.displacement_texture);
+
+  const UvMeshCorners corners = uv_mesh_corners(mesh, atlas);
+  const std::vector<uint32_t>& vt_of_corner = corners.uv_of_corner;
+  const std::vector<uint32_t>& vt_corner = corners.corner_of_uv;
 
   const std::vector<Vec3> normals = vertex_normals(mesh);
   fmt::memory_buffer obj;

@@ -45,7 +45,8 @@ using test::stats_without_timings;
 using test::temporaries_in;
 
 const char* const kFrameFiles[] = {"t.{:04d}.obj", "t.{:04d}.mtl", "t.color.{:04d}.exr", "t.disp.{:04d}.exr",
-                                   "t.aov.{:04d}.exr", "t.patches.{:04d}.ply", "t.render.{:04d}.json"};
+                                   "t.aov.{:04d}.exr", "t.patches.{:04d}.ply", "t.render.{:04d}.json",
+                                   "t.usd.{:04d}.usda"};
 
 }  // namespace
 
@@ -68,7 +69,8 @@ TEST(BakeWriter, SameInputsGiveByteIdenticalFiles) {
 
   const std::vector<std::string> files = names_in(a.str());
   ASSERT_EQ(files, names_in(b.str()));
-  ASSERT_EQ(files.size(), 3 * std::size(kFrameFiles) + 4);  // + bake.json, stats.jsonl, states 2 and 3
+  // + bake.json, stats.jsonl, states 2 and 3, the USD stage and its clip manifest
+  ASSERT_EQ(files.size(), 3 * std::size(kFrameFiles) + 6);
   for (const std::string& f : files) {
     if (f == "t.stats.jsonl") continue;
     const std::string bytes = test::read_bytes(a / f);

@@ -8,11 +8,14 @@
 #include <fstream>
 #include <iterator>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "io_test_helpers.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
+#include "lapflow/io/atomic_file.hpp"
 #include "lapflow/io/image.hpp"
 
 namespace lapflow {
@@ -339,6 +342,277 @@ TEST(ImageIo, WritesAreAtomic) {
   EXPECT_EQ(test::read_bytes(dir / "keep.nosuchformat"), "precious");
   EXPECT_TRUE(fs::is_directory(dir / "folder.exr"));
   EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "a.png", "folder.exr", "keep.nosuchformat"}));
+}
+
+// ---- ExrLayout::TiledMipmap ------------------------------------------------
+
+/// An OpenEXR header attribute: its type name and raw value.
+struct ExrAttribute {
+  std::string type, value;
+  std::string str() const { return value; }
+};
+
+/// The attributes of a single-part OpenEXR file's header, by name.
+std::map<std::string, ExrAttribute> exr_attributes(const std::string& path) {
+  const std::string bytes = test::read_bytes(path);
+  std::map<std::string, ExrAttribute> out;
+  std::size_t at = 8;  // magic number and version
+  auto cstring = [&] {
+    const std::size_t end = bytes.find('\0', at);
+    std::string s = bytes.substr(at, end - at);
+    at = end + 1;
+    return s;
+  };
+  while (at < bytes.size()) {
+    const std::string name = cstring();
+    if (name.empty()) break;
+    ExrAttribute a;
+    a.type = cstring();
+    int32_t size = 0;
+    std::memcpy(&size, bytes.data() + at, 4);
+    at += 4;
+    a.value = bytes.substr(at, std::size_t(size));
+    at += std::size_t(size);
+    out[name] = a;
+  }
+  return out;
+}
+
+/// Level count of a MIP map rounded down: floor(log2(max(w, h))) + 1.
+int mip_levels_of(int w, int h) {
+  int n = 1;
+  for (int s = std::max(w, h); s > 1; s /= 2) ++n;
+  return n;
+}
+
+/// The pixel type OpenEXR stores for every channel (1 half, 2 float; -1
+/// when they differ).
+int exr_pixel_type(const std::string& path) {
+  const std::string list = exr_attributes(path).at("channels").value;
+  int type = -2;
+  for (std::size_t at = 0; at < list.size() && list[at] != '\0';) {
+    at = list.find('\0', at) + 1;  // the name
+    int32_t t = 0;
+    std::memcpy(&t, list.data() + at, 4);
+    type = type == -2 || type == t ? t : -1;
+    at += 16;  // pixel type, pLinear + reserved, xSampling, ySampling
+  }
+  return type;
+}
+
+TEST(ImageIo, TiledExrHasTheScanlinePixelsTilesAndEveryMipLevel) {
+  // Any size: a power of two, an odd side, a non-square one; RGBA colour and
+  // one-channel displacement, half and float, from an Image and a HalfImage.
+  TempDir dir("tiled");
+  struct Size {
+    int w, h;
+  };
+  for (const Size size : {Size{128, 128}, Size{300, 300}, Size{100, 37}})
+    for (const int channels : {4, 1})
+      for (const ExrPixelType type : {ExrPixelType::Half, ExrPixelType::Float}) {
+        const std::string what = std::to_string(size.w) + "x" + std::to_string(size.h) + " c" +
+                                 std::to_string(channels) + (type == ExrPixelType::Half ? " half" : " float");
+        SCOPED_TRACE(what);
+        Image img = pattern(size.w, size.h, channels, -1.f, 4.f);
+        if (channels == 4)  // coverage, as a bake's alpha
+          for (std::size_t p = 0; p < img.pixels.size(); p += 4) img.pixels[p + 3] = float(p % 17) / 16.f;
+        const std::vector<std::string> names =
+            channels == 4 ? std::vector<std::string>{"R", "G", "B", "A"} : std::vector<std::string>{"Y"};
+        ExrOptions scan{type, ExrCompression::Rle};
+        ExrOptions tiled = scan;
+        tiled.layout = ExrLayout::TiledMipmap;
+        write_exr(dir / "scan.exr", img, names, scan);
+        write_exr(dir / "tiled.exr", img, names, tiled);
+        const Image want = read_image(dir / "scan.exr");
+        EXPECT_EQ(read_image(dir / "tiled.exr").pixels, want.pixels);
+        EXPECT_EQ(image_channel_names(dir / "tiled.exr"), names);
+        EXPECT_EQ(exr_pixel_type(dir / "tiled.exr"), type == ExrPixelType::Half ? 1 : 2);
+        EXPECT_EQ(exr_header_compression(dir / "tiled.exr"), 1);  // RLE kept, not maketx's zip
+
+        const ImageHeader h = read_image_header(dir / "tiled.exr");
+        EXPECT_EQ(h.width, size.w);
+        EXPECT_EQ(h.height, size.h);
+        EXPECT_EQ(h.channels, channels);
+        EXPECT_EQ(h.tile_width, 64);
+        EXPECT_EQ(h.tile_height, 64);
+        EXPECT_EQ(h.mip_levels, mip_levels_of(size.w, size.h));  // down to 1x1, never resized
+        const ImageHeader s = read_image_header(dir / "scan.exr");
+        EXPECT_EQ(s.tile_width, 0);
+        EXPECT_EQ(s.mip_levels, 1);
+
+        if (type == ExrPixelType::Half) {  // a bake's HalfImage: the same file
+          write_exr(dir / "from_half.exr", to_half_image(img), names, tiled);
+          EXPECT_EQ(test::read_bytes(dir / "from_half.exr"), test::read_bytes(dir / "tiled.exr"));
+        }
+      }
+}
+
+TEST(ImageIo, TiledExrInHalfClampsAlphaToTheUnitRange) {
+  // make_texture clamps a half texture to the half range and its alpha to
+  // [0, 1] (a bake's alpha is coverage: always inside); float is kept.
+  TempDir dir("tiled");
+  Image img(8, 8, 4, 0.5f);
+  img.at(1, 1, 3) = 1.5f;
+  img.at(2, 2, 3) = -0.25f;
+  img.at(3, 3, 0) = 2.5f;
+  ExrOptions tiled;
+  tiled.layout = ExrLayout::TiledMipmap;
+  write_exr(dir / "h.exr", img, {"R", "G", "B", "A"}, tiled);
+  const Image h = read_image(dir / "h.exr");
+  EXPECT_EQ(h.at(1, 1, 3), 1.f);
+  EXPECT_EQ(h.at(2, 2, 3), 0.f);
+  EXPECT_EQ(h.at(3, 3, 0), 2.5f);
+  tiled.type = ExrPixelType::Float;
+  write_exr(dir / "f.exr", img, {"R", "G", "B", "A"}, tiled);
+  EXPECT_EQ(read_image(dir / "f.exr").pixels, img.pixels);
+}
+
+TEST(ImageIo, TiledExrMetadataHasTheWrapModeAndColourSpaceAndNoDate) {
+  TempDir dir("tiled");
+  ExrOptions tiled;
+  tiled.layout = ExrLayout::TiledMipmap;
+  tiled.compression = ExrCompression::Zip;
+  write_exr(dir / "color.exr", pattern(70, 70, 4, 0.f, 1.f), {"R", "G", "B", "A"}, tiled);
+  write_exr(dir / "disp.exr", pattern(70, 70, 1), {"Y"}, tiled);
+  write_exr(dir / "rgb.exr", pattern(70, 70, 3, 0.f, 1.f), {"R", "G", "B"}, tiled);
+  ExrOptions data = tiled;
+  data.content = ExrContent::Data;  // e.g. a normal map stored as RGB
+  write_exr(dir / "data.exr", pattern(70, 70, 3, 0.f, 1.f), {"R", "G", "B"}, data);
+
+  const auto color = exr_attributes(dir / "color.exr");
+  EXPECT_EQ(color.at("wrapmodes").str(), "clamp,clamp");
+  EXPECT_EQ(color.at("colorInteropID").str(), "lin_rec709_scene");
+  EXPECT_EQ(color.at("textureformat").str(), "Plain Texture");
+  EXPECT_EQ(color.at("Software").str(), "lapflow");
+  EXPECT_EQ(exr_header_compression(dir / "color.exr"), 3);  // ZIP
+  // tiledesc: 64 x 64, MIPMAP_LEVELS (1) rounded down (0 << 4).
+  const std::string tiles = color.at("tiles").value;
+  ASSERT_EQ(tiles.size(), 9u);
+  uint32_t tile[2];
+  std::memcpy(tile, tiles.data(), 8);
+  EXPECT_EQ(tile[0], 64u);
+  EXPECT_EQ(tile[1], 64u);
+  EXPECT_EQ(int(static_cast<unsigned char>(tiles[8])), 1);
+  for (const auto& [name, a] : color) {
+    // No date (capDate), average colour or command line: nothing that
+    // changes from one write of the same image to the next.
+    EXPECT_NE(name, "capDate");
+    EXPECT_NE(name, "oiio:AverageColor");
+    EXPECT_NE(name, "oiio:ConstantColor");
+    EXPECT_NE(name, "oiio:SHA-1");
+    EXPECT_EQ(name.find("History"), std::string::npos) << name;
+  }
+  EXPECT_EQ(exr_attributes(dir / "disp.exr").at("colorInteropID").str(), "data");
+  EXPECT_EQ(exr_attributes(dir / "disp.exr").at("wrapmodes").str(), "clamp,clamp");
+  EXPECT_EQ(exr_attributes(dir / "rgb.exr").at("colorInteropID").str(), "lin_rec709_scene");
+  EXPECT_EQ(exr_attributes(dir / "data.exr").at("colorInteropID").str(), "data");
+
+  // The scanline file's header is as it was: no texture metadata.
+  write_exr(dir / "scan.exr", pattern(70, 70, 4, 0.f, 1.f), {"R", "G", "B", "A"});
+  const auto scan = exr_attributes(dir / "scan.exr");
+  for (const char* name : {"wrapmodes", "colorInteropID", "textureformat", "tiles", "capDate", "oiio:SHA-1"})
+    EXPECT_EQ(scan.count(name), 0u) << name;
+}
+
+TEST(ImageIo, TiledExrMipLevelsAreBoxFiltered) {
+  // Level k of a power-of-two texture is the mean of 2^k x 2^k texels (in
+  // float); the last one, 1x1, the mean of the whole image. Read with
+  // OpenImageIO's own oiiotool (lapflow reads level 0 only).
+  if (std::system("oiiotool --help >/dev/null 2>&1") != 0) GTEST_SKIP() << "oiiotool is not installed";
+  TempDir dir("tiled");
+  const Image img = pattern(32, 16, 4, 0.f, 1.f);
+  ExrOptions tiled{ExrPixelType::Float, ExrCompression::Rle};
+  tiled.layout = ExrLayout::TiledMipmap;
+  write_exr(dir / "t.exr", img, {"R", "G", "B", "A"}, tiled);
+  ASSERT_EQ(read_image_header(dir / "t.exr").mip_levels, 6);  // 32x16 ... 2x1, 1x1
+  for (const int level : {1, 5}) {
+    const std::string out = dir / ("level" + std::to_string(level) + ".exr");
+    ASSERT_EQ(std::system(("oiiotool '" + (dir / "t.exr") + "' --selectmip " + std::to_string(level) + " -o '" + out +
+                           "' >/dev/null 2>&1")
+                              .c_str()),
+              0);
+    const Image got = read_image(out);
+    const int w = std::max(1, img.width >> level), h = std::max(1, img.height >> level);
+    ASSERT_EQ(got.width, w);
+    ASSERT_EQ(got.height, h);
+    const int bx = img.width / w, by = img.height / h;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 4; ++c) {
+          double sum = 0;
+          for (int j = 0; j < by; ++j)
+            for (int i = 0; i < bx; ++i) sum += img.at(x * bx + i, y * by + j, c);
+          EXPECT_NEAR(got.at(x, y, c), sum / (bx * by), 1e-5) << "level " << level << " at " << x << "," << y;
+        }
+  }
+}
+
+TEST(ImageIo, TiledExrIsTheSameBytesAtAnyThreadCount) {
+  // make_texture filters and hashes on OpenImageIO's threads and OpenEXR
+  // compresses tiles on its own: the file must not depend on either.
+  TempDir dir("tiled");
+  const Image img = pattern(333, 200, 4, -1.f, 3.f);
+  ExrOptions tiled;
+  tiled.layout = ExrLayout::TiledMipmap;
+  const int before = thread_count();
+  std::string first;
+  for (const int threads : {1, 2, 4, 1}) {
+    set_thread_count(threads);
+    write_exr(dir / "t.exr", img, {"R", "G", "B", "A"}, tiled);
+    const std::string bytes = test::read_bytes(dir / "t.exr");
+    if (first.empty())
+      first = bytes;
+    else
+      EXPECT_TRUE(bytes == first) << threads << " threads";
+  }
+  set_thread_count(before);
+}
+
+TEST(ImageIo, TiledExrWritesAreAtomicAndStaged) {
+  TempDir dir("tiled");
+  const Image img = pattern(80, 80, 4, 0.f, 1.f);
+  ExrOptions tiled;
+  tiled.layout = ExrLayout::TiledMipmap;
+  write_exr(dir / "a.exr", img, {"R", "G", "B", "A"}, tiled);
+  EXPECT_EQ(files_in(dir.str()), std::vector<std::string>{"a.exr"});  // no temporary left (ours or OIIO's)
+  const std::string before = test::read_bytes(dir / "a.exr");
+
+  // Staged: only the temporary exists until the group commits.
+  {
+    StagedFiles staged;
+    write_exr(dir / "b.exr", to_half_image(img), {"R", "G", "B", "A"}, tiled, &staged);
+    write_exr(dir / "c.exr", Image(80, 80, 1, 0.25f), {"Y"}, tiled, &staged);
+    EXPECT_EQ(files_in(dir.str()).size(), 3u);
+    EXPECT_FALSE(fs::exists(dir / "b.exr"));
+    staged.commit(dir / "c.exr");
+  }
+  EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "b.exr", "c.exr"}));
+  EXPECT_EQ(test::read_bytes(dir / "b.exr"), before);
+  {
+    StagedFiles abandoned;
+    write_exr(dir / "d.exr", img, {"R", "G", "B", "A"}, tiled, &abandoned);
+  }
+  EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "b.exr", "c.exr"}));
+
+  // make_texture cannot write (no such folder): an OutputError naming the
+  // file, never a temporary name.
+  try {
+    write_exr(dir / "missing/e.exr", img, {"R", "G", "B", "A"}, tiled);
+    FAIL() << "expected OutputError";
+  } catch (const OutputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("e.exr"), std::string::npos) << what;
+    EXPECT_EQ(what.find(".tmp"), std::string::npos) << what;
+    EXPECT_EQ(what.find(".temp"), std::string::npos) << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+  }
+  // The final rename fails (the target is a folder): a.exr's neighbours
+  // untouched, nothing left behind.
+  fs::create_directories(dir / "folder.exr");
+  EXPECT_THROW(write_exr(dir / "folder.exr", img, {"R", "G", "B", "A"}, tiled), OutputError);
+  EXPECT_THROW(write_exr(dir / "f.exr", Image(), {}, tiled), OutputError);
+  EXPECT_EQ(test::read_bytes(dir / "a.exr"), before);
+  EXPECT_EQ(files_in(dir.str()), (std::vector<std::string>{"a.exr", "b.exr", "c.exr", "folder.exr"}));
 }
 
 }  // namespace

@@ -10,7 +10,7 @@
 //   lapflow_bench atlas [DATA]    the surface atlas alone
 //   lapflow_bench patches [DATA]  the patch stages alone
 //   lapflow_bench seeding [DATA]  the per-frame fresh seeding on shared frames
-//   lapflow_bench obj [DATA]      the UV-mesh OBJ writer on shared splash frames
+//   lapflow_bench obj [DATA]      the UV-mesh OBJ and USD layer writers on shared splash frames
 //   lapflow_bench replay DIR F [K] frame F of the bake in DIR computed again K times (default 5) from
 //                                 the previous frame's state, each step timed (tools/bench/bench_replay.cpp)
 //   lapflow_bench write DIR F [K] frame F's EXRs and state written again K times (default 5) each way,

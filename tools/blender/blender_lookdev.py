@@ -4,11 +4,13 @@
         [--out DIR] [--samples N] [--resolution WxH] [--displacement-scale S]
         [--displacement bump|true|none] [--camera auto|x,y,z] [--target x,y,z]
 
-For every chosen frame N it loads DIR/NAME.NNNN.obj (the fluid mesh with the
-atlas UVs), puts DIR/NAME.color.NNNN.exr on it as base colour and
-DIR/NAME.disp.NNNN.exr as bump (or true displacement), lights it with a sun and
-a sky, frames a camera on the bounding box of all chosen frames (the same
-camera for every frame) and renders OUT/NAME.NNNN.png with Cycles.
+It imports the bake with the lapflow_import add-on (tools/blender/lapflow_import:
+one object whose mesh is frame N's, from DIR/NAME.usd.NNNN.usda or
+DIR/NAME.NNNN.obj, with DIR/NAME.color.NNNN.exr as base colour and
+DIR/NAME.disp.NNNN.exr as bump, or true displacement, read as image
+sequences), lights it with a sun and a sky, frames a camera on the bounding
+box of all chosen frames (the same camera for every frame) and, for every
+chosen frame N, renders OUT/NAME.NNNN.png with Cycles.
 NAME, the frame list and the patch radius come from DIR/NAME.bake.json, which
 every `lapflow bake` writes.
 
@@ -26,6 +28,10 @@ import sys
 
 import bpy
 from mathutils import Vector
+
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import lapflow_import  # noqa: E402  (the add-on next to this script)
 
 
 class BadInput(Exception):
@@ -122,90 +128,16 @@ def read_manifest(folder, name):
         raise BadInput(f"{path}: not a readable lapflow bake manifest ({e})")
 
 
-def frame_files(folder, name, frame):
+def check_frame_files(folder, name, frame):
+    """The frame's mesh (its USD layer, or else its OBJ) and both atlases are there."""
     files = {"obj": f"{name}.{frame:04d}.obj", "color": f"{name}.color.{frame:04d}.exr",
              "disp": f"{name}.disp.{frame:04d}.exr"}
     files = {k: os.path.join(folder, v) for k, v in files.items()}
+    if os.path.isfile(os.path.join(folder, f"{name}.usd.{frame:04d}.usda")):
+        del files["obj"]
     for kind, path in files.items():
         if not os.path.isfile(path):
             raise BadInput(f"{path} (frame {frame}): missing {kind} file of the bake")
-    return files
-
-
-def import_obj(path, up):
-    before = set(bpy.data.objects)
-    # Blender's OBJ importer (3.3+); keep the file's axes as they are.
-    if up == "z":
-        bpy.ops.wm.obj_import(filepath=path, forward_axis="Y", up_axis="Z")
-    else:
-        bpy.ops.wm.obj_import(filepath=path)
-    new = [o for o in bpy.data.objects if o not in before and o.type == "MESH"]
-    if not new:
-        raise BadInput(f"{path}: Blender imported no mesh from it")
-    obj = new[0]
-    for poly in obj.data.polygons:
-        poly.use_smooth = True
-    return obj
-
-
-def load_image(path, colorspace):
-    img = bpy.data.images.load(path, check_existing=False)
-    img.colorspace_settings.name = colorspace
-    # The atlas's alpha only marks chart texels; keep the colour as stored.
-    img.alpha_mode = "CHANNEL_PACKED"
-    return img
-
-
-def make_material(name, files, args, disp_scale):
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    nodes.clear()
-    out = nodes.new("ShaderNodeOutputMaterial")
-    bsdf = nodes.new("ShaderNodeBsdfPrincipled")
-    links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    if args.material == "grey":
-        bsdf.inputs["Base Color"].default_value = (0.18, 0.18, 0.18, 1.0)
-        bsdf.inputs["Roughness"].default_value = 0.5
-        return mat
-    uv = nodes.new("ShaderNodeUVMap")
-    color = nodes.new("ShaderNodeTexImage")
-    # The atlas holds linear values already: no colour decoding.
-    color.image = load_image(files["color"], "Linear")
-    color.interpolation = "Linear"
-    color.extension = "EXTEND"
-    links.new(uv.outputs["UV"], color.inputs["Vector"])
-    links.new(color.outputs["Color"], bsdf.inputs["Base Color"])
-    if args.material == "liquid":
-        # Wet: a sharp clear coat over a moderately glossy base.
-        bsdf.inputs["Roughness"].default_value = 0.25
-        bsdf.inputs["Specular"].default_value = 0.5
-        bsdf.inputs["Clearcoat"].default_value = 0.8
-        bsdf.inputs["Clearcoat Roughness"].default_value = 0.04
-    else:
-        bsdf.inputs["Roughness"].default_value = 0.8
-        bsdf.inputs["Specular"].default_value = 0.2
-    if args.displacement == "none" or disp_scale <= 0:
-        return mat
-    disp = nodes.new("ShaderNodeTexImage")
-    disp.image = load_image(files["disp"], "Non-Color")
-    disp.interpolation = "Linear"
-    disp.extension = "EXTEND"
-    links.new(uv.outputs["UV"], disp.inputs["Vector"])
-    if args.displacement == "bump":
-        bump = nodes.new("ShaderNodeBump")
-        bump.inputs["Distance"].default_value = disp_scale
-        links.new(disp.outputs["Color"], bump.inputs["Height"])
-        links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
-        links.new(bump.outputs["Normal"], bsdf.inputs["Clearcoat Normal"])
-    else:
-        node = nodes.new("ShaderNodeDisplacement")
-        node.inputs["Scale"].default_value = disp_scale
-        node.inputs["Midlevel"].default_value = 0.5
-        links.new(disp.outputs["Color"], node.inputs["Height"])
-        links.new(node.outputs["Displacement"], out.inputs["Displacement"])
-        mat.cycles.displacement_method = "BOTH"
-    return mat
 
 
 def world_bbox(objects):
@@ -312,32 +244,33 @@ def main():
         raise BadInput(f"{manifest}: the bake lists no frames")
     folder = os.path.dirname(manifest)
     frames = parse_frames(args.frames, available)
-    files = {f: frame_files(folder, name, f) for f in frames}  # every file checked before any work
+    for f in frames:  # every file checked before any work
+        check_frame_files(folder, name, f)
     out_dir = os.path.abspath(args.out or os.path.join(folder, "lookdev"))
     os.makedirs(out_dir, exist_ok=True)
     disp_scale = args.displacement_scale if args.displacement_scale >= 0 else 0.1 * radius
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = setup_scene(args)
-    objects = {}
-    for f in frames:
-        obj = import_obj(files[f]["obj"], args.up)
-        obj.name = f"{name}.{f:04d}"
-        obj.data.materials.clear()
-        obj.data.materials.append(make_material(f"{name}.{f:04d}", files[f], args, disp_scale))
-        if args.displacement == "true" and args.material != "grey":
-            mod = obj.modifiers.new("subdivide", "SUBSURF")
-            mod.subdivision_type = "SIMPLE"
-            mod.levels = mod.render_levels = 2
-        objects[f] = obj
-    lo, hi = world_bbox(objects.values())
+    scene.frame_set(frames[0])
+    try:
+        # One object; the add-on's frame handler gives it frame f's mesh and
+        # textures at scene frame f. A Y-up bake is turned by the object's rotation.
+        obj = lapflow_import.import_bake(manifest, material=args.material, displacement=args.displacement,
+                                         displacement_scale=disp_scale, up=args.up, set_scene=False)
+        lo = Vector((math.inf,) * 3)
+        hi = Vector((-math.inf,) * 3)
+        for f in frames:
+            scene.frame_set(f)
+            a, b = world_bbox([obj])
+            lo, hi = Vector(map(min, lo, a)), Vector(map(max, hi, b))
+    except lapflow_import.BakeError as e:
+        raise BadInput(str(e))
     if not args.no_ground:
         add_ground(scene, lo, hi)
     add_camera(scene, args, lo, hi)
 
     for f in frames:
-        for g, obj in objects.items():
-            obj.hide_render = g != f
         scene.frame_set(f)
         path = os.path.join(out_dir, f"{name}.{f:04d}.png")
         scene.render.filepath = path

@@ -13,6 +13,7 @@ struct RenderCli {
   std::string frames;
   std::string exemplar, feature, displacement;
   bool aov = false, no_aov = false;
+  bool usd = false, no_usd = false;
 };
 
 void run_render(RenderCli& c) {
@@ -29,6 +30,8 @@ void run_render(RenderCli& c) {
   }
   if (c.aov) o.aov = true;
   if (c.no_aov) o.aov = false;
+  if (c.usd) o.usd = true;
+  if (c.no_usd) o.usd = false;
   const StopHandlersScope stop_handlers;
   std::size_t rendered = 0, skipped = 0;
   double seconds = 0;
@@ -82,6 +85,11 @@ void add_render_command(CLI::App& app) {
   cmd->add_option("--out", c.o.out_dir, "Output folder (default: the tracked folder)")->group("Output");
   add_table_flag(*cmd, "aov", [](const std::string& t) { c.aov = t == "true"; }, "(default: as the manifest says)");
   cmd->add_flag("--no-aov", c.no_aov, "Do not write NAME.aov.N.exr")->group("Output");
+  add_table_flag(*cmd, "texture", [](const std::string& t) { c.o.texture = t; }, "(default: the manifest's)");
+  add_table_flag(*cmd, "usd", [](const std::string& t) { c.usd = t == "true"; }, "(default: as the manifest says)");
+  cmd->add_flag("--no-usd", c.no_usd, "Do not write the USD layers and stage")->group("Output");
+  add_table_flag(*cmd, "up-axis", [](const std::string& t) { c.o.up_axis = t == "y" ? 'Y' : 'Z'; },
+                 "(default: the manifest's)");
   cmd->add_flag("--skip-done", c.o.skip_done,
                 "Skip a frame already in --out whose NAME.render.N.json says it was made from the same patches with "
                 "the same options and whose files are whole (a re-submitted farm job); render any other again, "

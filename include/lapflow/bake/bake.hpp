@@ -43,6 +43,11 @@ struct BakeOptions {
   bool aov = false;
   bool dump_patches = false;
   ExrOptions exr;
+  /// Also write the frame as a USD layer (NAME.usd.N.usda) and keep the
+  /// shot's stage NAME.usda naming every frame on disk (io/usd.hpp).
+  bool usd = true;
+  /// The stage's upAxis: 'Z' (Blender, Mantaflow) or 'Y' (Houdini, Maya).
+  char up_axis = 'Z';
   /// Read the next frame (mesh, Embree scene, velocity band) and build its
   /// surface atlas on another thread while the current one computes.
   bool prefetch_read = true;

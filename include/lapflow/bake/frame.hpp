@@ -130,8 +130,15 @@ struct Frame {
 /// velocity field under `source`'s rules. The atlas and the rest are the
 /// stages' to fill. Throws InputError naming the file and frame.
 std::unique_ptr<Frame> load_frame(const FrameSource& source, int frame);
-/// The same without the velocity (`lapflow render`): the mesh and the
-/// closest-point structure only.
-std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame);
+/// The same without the velocity field (`lapflow render`): the mesh and the
+/// closest-point structure, and with `velocity_grid` the frame's VDB grid
+/// when the source has one (for surface_velocities).
+std::unique_ptr<Frame> load_frame_surface(const FrameSource& source, int frame, bool velocity_grid = false);
+
+/// The simulation's velocity at each vertex of the frame's mesh, in m/s,
+/// as the simulator gave it (no min-speed): the VDB grid sampled at each
+/// vertex when the frame has one, else the mesh's own per-vertex
+/// velocities; empty when it has neither. What the USD layer's `velocities` hold (motion blur).
+std::vector<Vec3> surface_velocities(const Frame& frame);
 
 }  // namespace lapflow

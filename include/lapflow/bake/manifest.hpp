@@ -28,8 +28,13 @@ struct BakeManifest {
   /// Path of frame `frame`'s file of the given kind: "obj", "mtl", "color",
   /// "disp", "aov", "patches", "state" (NAME.state.N.bin, bake/state.hpp),
   /// "render" (NAME.render.N.json, bake/render_record.hpp), "lock"
-  /// (.NAME.N.lock, held while a process writes the frame).
+  /// (.NAME.N.lock, held while a process writes the frame), "usd"
+  /// (NAME.usd.N.usda, the frame's USD layer: io/usd.hpp).
   std::string frame_file(const std::string& kind, int frame) const;
+  /// A file of the whole shot in `dir`: "usd" NAME.usda (the USD stage),
+  /// "usd-clips" NAME.manifest.usda (its clip manifest), "usd-lock"
+  /// .NAME.usda.lock (held while the stage is rewritten).
+  std::string shot_file(const std::string& kind) const;
 };
 
 /// ECMAScript regexes matching the whole stem (the name before the last

@@ -21,6 +21,9 @@ struct RenderOptions {
   std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< empty: the manifest's
   std::string out_dir;                    ///< empty: `dir`
   std::optional<bool> aov;                ///< the manifest's when empty
+  std::optional<bool> usd;                ///< the manifest's when empty
+  std::string texture;                    ///< "scanline" or "tiled" (--texture); empty: the manifest's
+  std::optional<char> up_axis;            ///< 'Y' or 'Z'; the manifest's when empty
   /// Skip a frame already in out_dir whose record (NAME.render.N.json) says
   /// it was made from the same patches with the same options and whose files
   /// have their recorded sizes (a re-submitted farm job); render any other

@@ -6,6 +6,7 @@
 /// other's locks in a shared folder. The file holds its owner (process id,
 /// host name, and what it is doing) for the message of a process that finds
 /// it taken.
+#include <chrono>
 #include <optional>
 #include <string>
 #include <variant>
@@ -28,6 +29,11 @@ class FileLock {
   /// returns that owner. Throws OutputError naming `path` when the file
   /// cannot be created.
   static std::variant<FileLock, LockOwner> try_take(const std::string& path, const std::string& purpose);
+  /// try_take until the lock is free, for at most `patience`; the owner
+  /// when it is still held then. For short critical sections (a file that
+  /// several processes rewrite in turn).
+  static std::variant<FileLock, LockOwner> take_within(const std::string& path, const std::string& purpose,
+                                                       std::chrono::milliseconds patience);
   FileLock(FileLock&& other) noexcept;
   FileLock& operator=(FileLock&& other) noexcept;
   FileLock(const FileLock&) = delete;

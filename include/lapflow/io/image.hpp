@@ -27,6 +27,11 @@ enum class ColorSpace { Auto, sRGB, Linear };
 /// What an image file's header says, read without decoding any pixel.
 struct ImageHeader {
   int width = 0, height = 0, channels = 0;
+  /// Tile size of a tiled file; 0 for a scanline file.
+  int tile_width = 0, tile_height = 0;
+  /// Resolution levels: 1, or a MIP-mapped texture's levels (level 0 is
+  /// width x height; read_image reads level 0).
+  int mip_levels = 1;
   /// Bytes of the decoded image (float per channel), what read_image allocates.
   double decoded_bytes() const { return double(width) * double(height) * double(channels) * 4.0; }
 };
@@ -59,14 +64,64 @@ enum class ExrPixelType { Half, Float };
 /// (docs/performance.md). Zip: lossless zlib, smallest and slowest. Dwaa:
 /// lossy. None.
 enum class ExrCompression { Piz, Zip, Dwaa, None, Rle };
+/// How an EXR's pixels are laid out.
+enum class ExrLayout {
+  /// Scanlines, one resolution (the default): the smallest and fastest file.
+  Scanline,
+  /// A texture, as OpenImageIO's `maketx` makes it (ImageBufAlgo::make_texture,
+  /// MakeTxTexture): 64x64 tiles and every MIP level down to 1x1, each half
+  /// the size of the one above, rounded down (OpenEXR MIPMAP_LEVELS,
+  /// ROUND_DOWN; any size, no resizing to a power of two). Levels below 0 are
+  /// box-filtered (maketx's "box": the mean of 2x2 texels; along an odd
+  /// side, the bilinear value at the centre of the texel's footprint) and
+  /// computed in float, then stored in ExrOptions::type. Level 0 holds the
+  /// scanline file's pixels, except that in half make_texture clamps every
+  /// channel to the half range (+-65504, never infinity) and alpha ("A") to
+  /// [0, 1] (a bake's alpha is coverage: always inside). Its header holds,
+  /// besides the scanline file's:
+  /// `wrapmodes` "clamp,clamp" (an atlas's border texels are gutter or
+  /// background, never a chart: a filter that reaches past the border sees
+  /// them again, not black, nor the far side of the atlas),
+  /// `colorInteropID` (ExrContent), `textureformat` "Plain Texture" and
+  /// `fovcot` (width / height). Not maketx's date, average colour
+  /// (OpenImageIO sums it in an order that depends on its threads) nor
+  /// `oiio:SHA-1` (a second pass over level 0, only used to share identical
+  /// files): the same image gives the same bytes at any thread count. DWAA
+  /// on one channel becomes ZIP (maketx's rule).
+  TiledMipmap,
+};
+/// What a texture's channels hold, for its colour-space metadata
+/// (`colorInteropID`, the Color Interop Forum's name for the space, which
+/// OpenImageIO reads as the file's colour space since 3.1.10 and writes
+/// itself since 3.2; OpenImageIO 2.4 writes no colour space into an EXR).
+enum class ExrContent {
+  /// Color when the channels are R, G, B or R, G, B, A, Data otherwise
+  /// (displacement "Y", the AOV).
+  Auto,
+  /// Scene-linear Rec.709 colour: "lin_rec709_scene".
+  Color,
+  /// Not colour (displacement, ids, coordinates): "data", never
+  /// colour-converted.
+  Data,
+};
 struct ExrOptions {
   ExrPixelType type = ExrPixelType::Half;
   ExrCompression compression = ExrCompression::Rle;
+  ExrLayout layout = ExrLayout::Scanline;
+  /// Used by ExrLayout::TiledMipmap (a scanline file's header is unchanged).
+  ExrContent content = ExrContent::Auto;
 };
 /// Writes an EXR with the given channel names (size == img.channels),
 /// atomically (temporary file, then rename), or into the group `staged`.
 /// The header holds no date, time or host: the same image gives the same
-/// bytes. Throws OutputError.
+/// bytes. With ExrLayout::TiledMipmap, make_texture writes the texture
+/// under a name of its own beside the temporary file and renames it to that
+/// (a process killed meanwhile may leave `.STEM.tmpHOST-PID_K.XXXXXXXX.temp.EXT`,
+/// XXXXXXXX hex digits), through the page cache (it opens the file itself:
+/// LAPFLOW_DIRECT_IO does not apply), and, for a half file, it holds level 0
+/// twice in float while it writes (a 6144^2 RGBA half atlas: 1.3 GiB more
+/// than the image; its one-channel displacement: 0.32 GiB). Throws
+/// OutputError.
 void write_exr(const std::string& path, const Image& img, const std::vector<std::string>& channel_names,
                const ExrOptions& options = {}, StagedFiles* staged = nullptr);
 /// An image converted to EXR half (IEEE binary16 bits, round to nearest
