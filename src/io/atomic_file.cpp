@@ -181,9 +181,11 @@ std::vector<std::string> remove_stale_temporaries(const std::string& dir,
                                                   std::chrono::seconds foreign_age) {
   std::string alternatives;
   for (const std::string& p : stem_patterns) alternatives += (alternatives.empty() ? "" : "|") + p;
-  // The shape temporary_path() gives, .STEM.tmpHOST-PID_K.EXT, and the one
-  // before the host tag, .STEM.tmpPID_K.EXT.
-  const std::regex stale("\\.(?:" + alternatives + ")\\.tmp(?:([0-9a-f]{8})-)?([0-9]+)_[0-9]+(?:\\.[A-Za-z0-9]+)?");
+  // The shape temporary_path() gives, .STEM.tmpHOST-PID_K.EXT, the one
+  // before the host tag, .STEM.tmpPID_K.EXT, and OpenImageIO's texture
+  // maker's own temporary beside ours, .STEM.tmpHOST-PID_K.XXXXXXXX.temp.EXT.
+  const std::regex stale("\\.(?:" + alternatives +
+                         ")\\.tmp(?:([0-9a-f]{8})-)?([0-9]+)_[0-9]+(?:\\.[0-9a-f]{8}\\.temp)?(?:\\.[A-Za-z0-9]+)?");
   const auto now = fs::file_time_type::clock::now();
   std::vector<std::string> removed;
   std::error_code ec;

@@ -109,7 +109,10 @@ TEST(StaleTemporaries, OnlyThisBakesTemporaryFilesAreRemoved) {
                                           tmp("t.0002", ".obj"),       tmp("t.0002", ".mtl"),
                                           tmp("t.stats", ".jsonl"),    tmp("t.bake", ".json"),
                                           tmp("t.patches.0002", ".ply"), tmp("t.aov.0013", ".exr"),
-                                          tmp("t.state.0013", ".bin")};
+                                          tmp("t.state.0013", ".bin"), tmp("t.usd.0002", ".usda"),
+                                          tmp("t", ".usda"), tmp("t.manifest", ".usda"),
+                                          // OpenImageIO's texture maker's temporary beside ours (--texture tiled)
+                                          tmp("t.color.0002", ".0a1b2c3d.temp.exr")};
   const std::vector<std::string> kept = {
       tmp("u.color.0002", ".exr"),  // another bake's
       tmp("tx.0002", ".obj"),       // another bake whose name starts with "t"
