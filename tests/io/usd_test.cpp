@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "io_test_helpers.hpp"
+#include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/io/usd.hpp"
 
@@ -240,6 +241,27 @@ TEST(UsdStage, NamesEveryFrameOnDiskAfterABakeAResumeAndARender) {
   bake_demo(other, "--no-usd");
   EXPECT_FALSE(fs::exists(other / "bake/demo.usda"));
   EXPECT_FALSE(fs::exists(other / "bake/demo.usd.0001.usda"));
+}
+
+// --texture tiled: the same atlases, tiled and mip-mapped, under the same
+// names (the MTL and the stage need no change), and recorded as such.
+TEST(RenderReadyTextures, TextureTiledWritesTheSameAtlasesTiledAndMipMapped) {
+  TempDir dir("tiled");
+  bake_demo(dir, "--no-usd");
+  fs::rename(dir / "bake", dir / "scanline");
+  bake_demo(dir, "--no-usd --texture tiled");
+  for (const char* kind : {"color", "disp"}) {
+    const std::string file = std::string("demo.") + kind + ".0002.exr";
+    const ImageHeader tiled = read_image_header(dir / ("bake/" + file)), plain = read_image_header(dir / ("scanline/" + file));
+    EXPECT_EQ(plain.tile_width, 0) << file;
+    EXPECT_EQ(tiled.tile_width, 64) << file;
+    EXPECT_EQ(tiled.mip_levels, 8) << file << ": 128 down to 1";
+    const Image a = read_image(dir / ("bake/" + file), ColorSpace::Linear),
+                b = read_image(dir / ("scanline/" + file), ColorSpace::Linear);
+    EXPECT_TRUE(a.pixels == b.pixels) << file << ": level 0 is the scanline file's";
+  }
+  EXPECT_EQ(test::read_bytes(dir / "bake/demo.0002.mtl"), test::read_bytes(dir / "scanline/demo.0002.mtl"));
+  EXPECT_NE(test::read_bytes(dir / "bake/demo.render.0002.json").find("\"texture\": \"tiled\""), std::string::npos);
 }
 
 TEST(UsdStage, PrimNamesAreIdentifiers) {
