@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -134,6 +135,33 @@ inline int run_command(const std::string& cmd, std::string* out, std::string* er
   if (out) *out = read_bytes(o);
   if (err) *err = read_bytes(e);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/// Whether the program `name` is on PATH (tests that need blender or node
+/// skip without it; CI installs both).
+inline bool have_command(const std::string& name, const TempDir& scratch) {
+  return run_command("command -v " + name, nullptr, nullptr, scratch) == 0;
+}
+
+/// The built-in demo, `frames` frames of 2000 triangles, in `dir`/mesh (kept
+/// when already there), baked with the lava exemplar at radius 0.05 into
+/// `dir`/bake with `options` added (e.g. "--resolution 256"). Fails the
+/// test with the command's message.
+inline void bake_lava_demo(const TempDir& dir, int frames, const std::string& options) {
+  const std::string lapflow = LAPFLOW_BINARY;
+  std::string err;
+  if (!std::filesystem::exists(dir / "mesh")) {
+    ASSERT_EQ(run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames " + std::to_string(frames) +
+                              " --triangles 2000 --no-bake -q",
+                          nullptr, &err, dir),
+              0)
+        << err;
+  }
+  ASSERT_EQ(run_command(lapflow + " bake --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --exemplar lava --radius 0.05 -q " +
+                            "--out '" + (dir / "bake") + "' " + options,
+                        nullptr, &err, dir),
+            0)
+      << err;
 }
 
 /// Whether a test whose ../shared/data input is absent fails instead of

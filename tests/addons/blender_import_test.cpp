@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "addons/albedo_helpers.hpp"
 #include "io_test_helpers.hpp"
 #include "lapflow/io/image.hpp"
 
@@ -27,26 +28,14 @@ using nlohmann::json;
 using test::TempDir;
 namespace fs = std::filesystem;
 
-bool have_blender(const TempDir& dir) { return test::run_command("command -v blender", nullptr, nullptr, dir) == 0; }
+bool have_blender(const TempDir& dir) { return test::have_command("blender", dir); }
 
 std::string import_test(const std::string& args) {
   return "blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender/lapflow_import_test.py' -- " + args;
 }
 
 /// A 3-frame demo baked with lava into DIR/bake (meshes in DIR/mesh).
-void bake_demo(const TempDir& dir) {
-  const std::string lapflow = LAPFLOW_BINARY;
-  std::string err;
-  ASSERT_EQ(test::run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames 3 --triangles 2000 --no-bake -q",
-                              nullptr, &err, dir),
-            0)
-      << err;
-  ASSERT_EQ(test::run_command(lapflow + " bake --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --exemplar lava " +
-                                  "--resolution 256 --radius 0.05 -q --out '" + (dir / "bake") + "'",
-                              nullptr, &err, dir),
-            0)
-      << err;
-}
+void bake_demo(const TempDir& dir) { test::bake_lava_demo(dir, 3, "--resolution 256"); }
 
 std::string frame_file(const std::string& folder, const std::string& kind, int frame) {
   char digits[16];
@@ -182,17 +171,9 @@ int occurrences(const std::string& text, const std::string& what) {
   return n;
 }
 
-using Rgb = std::array<double, 3>;
-
-Rgb chromaticity(const Rgb& c) {
-  const double s = c[0] + c[1] + c[2];
-  return {c[0] / s, c[1] / s, c[2] / s};
-}
-double chroma_distance(const Rgb& a, const Rgb& b) {
-  const Rgb ca = chromaticity(a), cb = chromaticity(b);
-  return std::max({std::abs(ca[0] - cb[0]), std::abs(ca[1] - cb[1]), std::abs(ca[2] - cb[2])});
-}
-double luma(const Rgb& c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
+using test::Rgb;
+using test::chroma_distance;
+using test::luma;
 
 /// The atlas's mean colour over chart texels (A = 1).
 Rgb atlas_mean(const std::string& path) {

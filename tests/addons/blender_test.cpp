@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "addons/albedo_helpers.hpp"
 #include "io_test_helpers.hpp"
 #include "lapflow/io/image.hpp"
 
@@ -16,39 +17,22 @@ namespace {
 
 using test::TempDir;
 
-bool have_blender(const TempDir& dir) { return test::run_command("command -v blender", nullptr, nullptr, dir) == 0; }
+bool have_blender(const TempDir& dir) { return test::have_command("blender", dir); }
 
 std::string lookdev(const std::string& args) {
   return "blender -b --factory-startup -P '" LAPFLOW_SOURCE_DIR "/tools/blender/blender_lookdev.py' -- " + args;
 }
 
-using Rgb = std::array<double, 3>;
-
-Rgb chromaticity(const Rgb& c) {
-  const double s = c[0] + c[1] + c[2];
-  return {c[0] / s, c[1] / s, c[2] / s};
-}
-double chroma_distance(const Rgb& a, const Rgb& b) {
-  const Rgb ca = chromaticity(a), cb = chromaticity(b);
-  return std::max({std::abs(ca[0] - cb[0]), std::abs(ca[1] - cb[1]), std::abs(ca[2] - cb[2])});
-}
-double luma(const Rgb& c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
+using test::Rgb;
+using test::chroma_distance;
+using test::luma;
 
 TEST(BlenderLookdev, RendersTheAtlasColoursOfABake) {
   TempDir dir("blender");
   if (!have_blender(dir)) GTEST_SKIP() << "blender is not on PATH: the Blender lookdev script is not tested here";
-  const std::string lapflow = LAPFLOW_BINARY;
-  std::string err;
-  ASSERT_EQ(test::run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames 2 --triangles 2000 --no-bake -q",
-                              nullptr, &err, dir),
-            0)
-      << err;
   // lava: dark red-brown plates and orange cracks, far from grey.
-  ASSERT_EQ(test::run_command(lapflow + " bake --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --exemplar lava " +
-                                  "--resolution 256 --radius 0.05 -q --out '" + (dir / "bake") + "'",
-                              nullptr, &err, dir),
-            0)
-      << err;
+  ASSERT_NO_FATAL_FAILURE(test::bake_lava_demo(dir, 2, "--resolution 256"));
+  std::string err;
 
   // Matte, no bump, no ground, linear view: the render is albedo x lighting,
   // so textured / grey (albedo 0.18) is the albedo the camera saw.

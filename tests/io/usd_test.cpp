@@ -74,23 +74,11 @@ std::vector<double> authored(const std::string& layer_text, const std::string& a
   return values;
 }
 
-bool have_node(const TempDir& dir) { return test::run_command("command -v node", nullptr, nullptr, dir) == 0; }
+bool have_node(const TempDir& dir) { return test::have_command("node", dir); }
 
 /// A three-frame demo baked with the lava exemplar into `dir`/bake (`extra` options added).
 void bake_demo(const TempDir& dir, const std::string& extra = "") {
-  const std::string lapflow = LAPFLOW_BINARY;
-  std::string err;
-  if (!fs::exists(dir / "mesh")) {
-    ASSERT_EQ(test::run_command(lapflow + " demo --out '" + (dir / "mesh") + "' --frames 3 --triangles 2000 --no-bake -q",
-                                nullptr, &err, dir),
-              0)
-        << err;
-  }
-  ASSERT_EQ(test::run_command(lapflow + " bake --mesh '" + (dir / "mesh") + "/demo.%04d.ply' --exemplar lava " +
-                                  "--resolution 128 --radius 0.05 -q --out '" + (dir / "bake") + "' " + extra,
-                              nullptr, &err, dir),
-            0)
-      << err;
+  test::bake_lava_demo(dir, 3, "--resolution 128 " + extra);
 }
 
 std::string frame_name(const char* pattern, int frame) {
