@@ -268,12 +268,19 @@ PatchTriGeometry patch_tri_geometry(const Patch& patch, const Tri& t) {
   return g;
 }
 
+// The seam fallback's buffers, one set per thread (the thread-local is looked
+// up once per patch, not at every step of the walk).
+struct SeamWalk {
+  std::vector<int32_t> found;
+  StampSet looked;
+};
+
 // Seam fallback: the fluid triangles near the patch triangle (walk over shared
 // vertices from its vertices' triangles, bounded by its bounding sphere plus a
 // margin), each drawn through its own affine map into its own texels.
 template <class Sink>
 void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int ti, const int vtri[3], uint64_t key,
-                        std::vector<int32_t>& found, int exclude_chart = -1, const TileMask* clip = nullptr) {
+                        SeamWalk& walk, int exclude_chart = -1, const TileMask* clip = nullptr) {
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
@@ -282,21 +289,23 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
   // whole liquid (--mode advect) walks the 4096 triangles of the guard for
   // each of its triangles. The distance test does not depend on where the
   // walk came from, so each triangle is tested once.
-  thread_local StampSet looked;
+  StampSet& looked = walk.looked;
+  std::vector<int32_t>& found = walk.found;
   looked.clear(ctx.mesh.triangles.size());
   found.clear();
   for (int k = 0; k < 3; ++k)
     if (vtri[k] >= 0 && looked.insert(std::size_t(vtri[k]))) found.push_back(vtri[k]);
   constexpr std::size_t kMaxWalk = 4096;  // guard against pathological meshes
   for (std::size_t q = 0; q < found.size() && found.size() < kMaxWalk; ++q) {
-    const Tri& ft = ctx.mesh.triangles[found[q]];
-    for (int k = 0; k < 3; ++k)
-      for (int32_t j = ctx.vt_offset[ft[k]]; j < ctx.vt_offset[ft[k] + 1]; ++j) {
-        const int32_t g2 = ctx.vt_list[j];
-        if (!looked.insert(std::size_t(g2))) continue;
-        if (norm(ctx.tri_centroid[g2] - g.centre) > g.radius + ctx.tri_radius[g2] + g.margin) continue;
-        found.push_back(g2);
-      }
+    const int32_t* nb = ctx.tt_list.data() + ctx.tt_offset[found[q]];
+    const int32_t* end = ctx.tt_list.data() + ctx.tt_offset[found[q] + 1];
+    for (; nb != end; ++nb) {
+      const int32_t g2 = *nb;
+      if (!looked.insert(std::size_t(g2))) continue;
+      const RasterContext::Sphere& s = ctx.tri_sphere[g2];
+      if (norm(s.centre - g.centre) > g.radius + s.radius + g.margin) continue;
+      found.push_back(g2);
+    }
   }
   const auto& tm = ctx.atlas.texels;
   for (const int32_t F : found) {
@@ -623,6 +632,8 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
     vok[v] = vtri[v] >= 0 && to_pixels(ctx, vtri[v], patch.positions[v], vpix[v]);
   }
   std::vector<int32_t> scratch;
+  thread_local SeamWalk walk_here;
+  SeamWalk& walk = walk_here;
   std::vector<ChartTriangle> in_chart;
   std::vector<uint8_t> crossing;
   in_chart.reserve(patch.triangles.size());
@@ -673,12 +684,12 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
       } else if (crosses) {
         const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
         ++counters.seam_triangles;
-        draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, c0, clip);
+        draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), walk, c0, clip);
       }
     } else {
       ++counters.seam_triangles;
       const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
-      draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), scratch, -1, clip);
+      draw_seam_triangle(ctx, sink, patch, int(ti), vt, make_key(patch_index, ti), walk, -1, clip);
     }
   }
   // Group by chart (stable: triangle order kept inside a chart).
@@ -703,7 +714,7 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
     const Tri& t = patch.triangles[in_chart[k].index];
     const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
     draw_seam_triangle(ctx, sink, patch, in_chart[k].index, vt,
-                       make_key(patch_index, std::size_t(in_chart[k].index)), scratch, in_chart[k].chart, clip);
+                       make_key(patch_index, std::size_t(in_chart[k].index)), walk, in_chart[k].chart, clip);
   }
 }
 

@@ -125,13 +125,24 @@ struct RasterContext {
   std::vector<uint64_t> rest_ground;
   /// Per fluid triangle: the map of to_pixels.
   std::vector<TrianglePixelMap> pixel_map;
-  /// Fluid triangles: unit normal, centroid and bounding radius (seam fallback).
-  std::vector<Vec3> tri_normal, tri_centroid;
-  std::vector<double> tri_radius;
+  /// Fluid triangles: unit normal (seam fallback).
+  std::vector<Vec3> tri_normal;
+  /// A fluid triangle's centroid and bounding radius, side by side: the seam
+  /// fallback's walk reads both for every triangle it meets.
+  struct Sphere {
+    Vec3 centre;
+    double radius;
+  };
+  std::vector<Sphere> tri_sphere;
   /// Twice each fluid triangle's area in atlas pixels.
   std::vector<double> tri_area2_px;
-  /// Vertex -> incident fluid triangles (CSR), for the seam fallback's walk.
+  /// Vertex -> incident fluid triangles (CSR), in triangle order.
   std::vector<int32_t> vt_offset, vt_list;
+  /// Fluid triangle -> the other triangles sharing a vertex with it (CSR):
+  /// its vertices' lists of vt_list in vertex order, each triangle where it
+  /// first appears. The seam fallback's walk meets its triangles in the
+  /// order the three vertex lists give, without their repeats.
+  std::vector<int32_t> tt_offset, tt_list;
   /// Fluid triangles with a vertex shared with another chart.
   std::vector<uint8_t> near_seam;
   /// Seam vertices (shared by two charts) bucketed on a grid of `seam_cell`

@@ -37,8 +37,7 @@ void setup_context(RasterContext& ctx) {
 
   ctx.pixel_map.resize(nt);
   ctx.tri_normal.resize(nt);
-  ctx.tri_centroid.resize(nt);
-  ctx.tri_radius.resize(nt);
+  ctx.tri_sphere.resize(nt);
   ctx.tri_area2_px.resize(nt);
   parallel_for(nt, [&](std::size_t b, std::size_t e) {
     for (std::size_t t = b; t < e; ++t) {
@@ -46,8 +45,7 @@ void setup_context(RasterContext& ctx) {
       const Vec3 &a = mesh.positions[T[0]], &bb = mesh.positions[T[1]], &c = mesh.positions[T[2]];
       ctx.tri_normal[t] = normalized(cross(bb - a, c - a));
       const Vec3 m = (a + bb + c) / 3.0;
-      ctx.tri_centroid[t] = m;
-      ctx.tri_radius[t] = std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}));
+      ctx.tri_sphere[t] = {m, std::sqrt(std::max({norm2(a - m), norm2(bb - m), norm2(c - m)}))};
       const Vec2* cu = &atlas.corner_uv[t * 3];
       ctx.tri_area2_px[t] = std::abs(cross(cu[1] - cu[0], cu[2] - cu[0])) * double(ctx.N) * ctx.N;
       TrianglePixelMap& pm = ctx.pixel_map[t];
@@ -68,6 +66,31 @@ void setup_context(RasterContext& ctx) {
   std::vector<int32_t> fill(ctx.vt_offset.begin(), ctx.vt_offset.end() - 1);
   for (std::size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) ctx.vt_list[fill[mesh.triangles[t][k]]++] = int32_t(t);
+
+  // Triangle -> triangles sharing a vertex: a count, then a fill.
+  auto neighbours = [&](std::size_t t, auto&& emit) {
+    int32_t seen[64];
+    int count = 0;
+    for (int k = 0; k < 3; ++k)
+      for (int32_t j = ctx.vt_offset[mesh.triangles[t][k]]; j < ctx.vt_offset[mesh.triangles[t][k] + 1]; ++j) {
+        const int32_t g = ctx.vt_list[j];
+        if (g == int32_t(t) || std::find(seen, seen + count, g) != seen + count) continue;
+        if (count < 64) seen[count++] = g;  // past 64 a repeat stays: the walk's set skips it
+        emit(g);
+      }
+  };
+  ctx.tt_offset.assign(nt + 1, 0);
+  parallel_for(nt, [&](std::size_t b, std::size_t e) {
+    for (std::size_t t = b; t < e; ++t) neighbours(t, [&](int32_t) { ++ctx.tt_offset[t + 1]; });
+  }, 4096);
+  for (std::size_t t = 0; t < nt; ++t) ctx.tt_offset[t + 1] += ctx.tt_offset[t];
+  ctx.tt_list.resize(std::size_t(ctx.tt_offset[nt]));
+  parallel_for(nt, [&](std::size_t b, std::size_t e) {
+    for (std::size_t t = b; t < e; ++t) {
+      int32_t at = ctx.tt_offset[t];
+      neighbours(t, [&](int32_t g) { ctx.tt_list[std::size_t(at++)] = g; });
+    }
+  }, 4096);
 
   // Seams: vertices whose triangles lie in more than one chart.
   std::vector<uint8_t> seam_vertex(mesh.positions.size(), 0);
