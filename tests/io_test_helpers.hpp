@@ -12,6 +12,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -21,6 +23,7 @@
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/bake/bake.hpp"
 #include "lapflow/core/errors.hpp"
+#include "test_helpers.hpp"
 
 namespace lapflow::test {
 
@@ -162,6 +165,22 @@ inline void bake_lava_demo(const TempDir& dir, int frames, const std::string& op
                         nullptr, &err, dir),
             0)
       << err;
+}
+
+/// A 1 m x 1 m plane flowing along +y at 0.2 m/s, with a vertex property
+/// `heat` = heat(x, frame), as ASCII PLY frames m.0001.ply, ...
+inline void write_heat_plane(const std::string& dir, int frames, const std::function<double(double, int)>& heat) {
+  const TriMesh m = plane_grid(48, 48, 1.0, 1.0);
+  for (int f = 1; f <= frames; ++f) {
+    std::string text = fmt::format(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n"
+        "property float vx\nproperty float vy\nproperty float vz\nproperty float heat\nelement face {}\n"
+        "property list uchar int vertex_indices\nend_header\n",
+        m.vertex_count(), m.triangle_count());
+    for (const Vec3& p : m.positions) text += fmt::format("{} {} {} 0 0.2 0 {}\n", p.x, p.y, p.z, heat(p.x, f));
+    for (const Tri& t : m.triangles) text += fmt::format("3 {} {} {}\n", t[0], t[1], t[2]);
+    test::write_bytes(fmt::format("{}/m.{:04d}.ply", dir, f), text);
+  }
 }
 
 /// Whether a test whose ../shared/data input is absent fails instead of

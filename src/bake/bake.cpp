@@ -26,6 +26,7 @@
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/interrupt.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "lapflow/io/atomic_file.hpp"
 #include "lapflow/core/stopwatch.hpp"
 #include "lapflow/io/mesh_io.hpp"
@@ -67,13 +68,17 @@ FrameSource frame_source(const BakeOptions& o) {
   source.units_ok = o.units_ok;
   source.velocity_band = o.velocity_band;
   source.velocity_voxel = o.velocity_voxel;
+  source.attributes = layer_rules(o).file_attributes();
   return source;
 }
 
 BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
   if (o.mesh_pattern.empty()) throw UsageError("--mesh is required (a per-frame PLY/OBJ pattern)");
   if (o.out_dir.empty()) throw UsageError("--out is required");
-  if (o.exemplar_color.empty()) throw UsageError("--exemplar is required");
+  if (o.layers.empty() && o.exemplar_color.empty()) throw UsageError("--exemplar (or --layer) is required");
+  if (!o.layers.empty() && !o.exemplar_color.empty())
+    throw UsageError("--exemplar and --layer: with layers, give every exemplar as a --layer");
+  layer_rules(o);  // checks the layers and their rules
   if (!(o.fps > 0)) throw UsageError("--fps must be positive");
   o.advect.dt = 1.0 / o.fps;
   o.patch.seed = o.seed;
@@ -119,7 +124,7 @@ void record_frame_stats(const Frame& frame, const RasterStats& tracking, const P
   // Births and deaths: the tracking raster's decisions.
   const RasterStats& t = tracking;
   st.patches_born += t.patches_born;
-  st.patches_retired = t.patches_retired;
+  st.patches_retired = t.patches_retired + st.retired_layer;
   st.retired_eroded = t.retired_eroded;
   st.retired_hidden = t.retired_hidden;
   st.retired_merged = t.retired_merged;
@@ -233,7 +238,7 @@ void check_bake_state(const BakeState& state, const std::string& path, const Bak
                                "'s");
 }
 
-void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& exemplar, const BakeOptions& o) {
+void render_frame(Frame& frame, const PatchSet& patches, ExemplarLayers exemplar, const BakeOptions& o) {
   FrameStats& st = frame.stats;
   RasterOptions output = o.raster;
   output.held_texel = o.track_texel;
@@ -271,10 +276,40 @@ void build_frame_atlases(Frame& frame, const BakeOptions& o) {
   frame.atlas = std::move(both[1]);
 }
 
-RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const RasterExemplar& textures,
+namespace {
+
+/// Counts, per patch, the frames in a row its centre has lain where `field`
+/// chooses another layer (Patch::layer_off), and removes the patches where
+/// that count reaches `frames`. Returns how many went.
+std::size_t retire_off_layer(const LayerField& field, int frames, PatchSet& patches) {
+  std::vector<Patch>& all = patches.patches;
+  parallel_for(all.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p) {
+      Patch& patch = all[p];
+      if (field.layer_at(patch.center) == int(patch.layer))
+        patch.layer_off = 0;
+      else if (patch.layer_off < UINT16_MAX)
+        ++patch.layer_off;
+    }
+  }, 16);
+  const std::size_t before = all.size();
+  std::erase_if(all, [&](const Patch& patch) { return patch.layer_off >= frames; });
+  return before - all.size();
+}
+
+}  // namespace
+
+RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, ExemplarLayers textures,
                         const BakeOptions& o) {
+  if (textures.size() != std::max<std::size_t>(1, o.layers.size()))
+    throw std::invalid_argument("track_frame: one exemplar per layer");
   FrameStats& st = cur.stats;
   Stopwatch clock;
+  // Exemplar layers: the layer the rules choose at each surface point.
+  const LayerRules rules = layer_rules(o);
+  LayerField field;
+  if (rules.size() > 1) field = LayerField(rules, cur);
+  st.layered = rules.size() > 1;
   if (prev && !patches.patches.empty()) {
     // Step 4: the patches follow the flow onto this frame's surface.
     AdvectOptions advect = o.advect;
@@ -286,6 +321,10 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
     // Step 5.
     update_weights(cur.mesh, o.patch.radius, o.weights, patches);
     st.seconds_weights = clock.lap();
+    // A patch whose centre has lain where the rules choose another layer
+    // for layer_switch frames goes, and the new layer's patches take its
+    // place (docs/layers.md, "Changing regions").
+    if (!field.empty()) st.retired_layer = retire_off_layer(field, o.layer_switch, patches);
   }
   // New patches (seeding, hole filling) see this frame's flow.
   PatchOptions born = o.patch;
@@ -295,6 +334,11 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
   if (patches.patches.empty() && !cur.mesh.empty()) {
     // Steps 1-3 on the first frame, and after the liquid vanished.
     seed_patches(*cur.surface, cur.number, born, o.seeding, o.weights, patches);
+    if (!field.empty()) {
+      parallel_for(patches.patches.size(), [&](std::size_t b, std::size_t e) {
+        for (std::size_t p = b; p < e; ++p) patches.patches[p].layer = uint16_t(field.layer_at(patches.patches[p].center));
+      }, 16);
+    }
     st.patches_born += patches.patches.size();
     st.seconds_seed = clock.lap();
   }
@@ -309,10 +353,18 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, const 
   Stopwatch step;
   const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
   const double seconds_adjacency = step.lap();
-  const RasterStats t =
-      track_pass(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights,
-                 surface_triangle_locator(*cur.surface, o.raster.radius), cur.number,
-                 surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number), patches);
+  PatchMaker make_patch = surface_patch_maker(*cur.surface, adjacency, born, o.weights, cur.number);
+  if (!field.empty()) {
+    // A newborn takes the layer of the point it is born at.
+    make_patch = [base = std::move(make_patch), &field](const SurfacePoint& at, uint32_t id) {
+      std::optional<Patch> patch = base(at, id);
+      if (patch) patch->layer = uint16_t(field.layer_at(at.position));
+      return patch;
+    };
+  }
+  const RasterStats t = track_pass(cur.mesh, cur.tracking_atlas, textures, tracking, o.weights,
+                                   surface_triangle_locator(*cur.surface, o.raster.radius), cur.number, make_patch,
+                                   patches);
   st.tracking.seconds_setup = t.seconds_setup;
   st.tracking.seconds_draw = t.seconds_raster;
   st.tracking.seconds_holes = seconds_adjacency + t.seconds_holes;
@@ -344,12 +396,12 @@ void prepare_output_folder(const BakeOptions& o) {
 void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on_frame) {
   const FramePattern meshes(o.mesh_pattern);
   const std::vector<int> frames = resolve_frames(meshes, o.frames);
-  const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
-  const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
+  const BakeExemplars exemplars = load_bake_exemplars(o);
+  const ExemplarLayers textures = exemplars.layers();
   detail::prepare_output_folder(o);
   // The manifest also names every output file (BakeManifest::frame_file).
   BakeManifest manifest = make_bake_manifest(o, frames);
-  manifest.feature_digest = exemplar_feature_digest(exemplar.feature);
+  manifest.feature_digest = exemplars.feature_digest();
   ResumePoint resume;
   if (o.resume) resume = find_resume_point(o, manifest);
   remove_states_after(o, manifest, resume.index);
@@ -360,7 +412,7 @@ void bake(const BakeOptions& o, const std::function<void(const FrameStats&)>& on
   if (o.until_frame) std::erase_if(todo, [&](int f) { return f > *o.until_frame; });
   detail::FrameReader reader(o, todo);
   detail::FrameWriter writer(o, manifest, on_frame);
-  writer.set_exemplar_digest(exemplar_digest(exemplar));
+  writer.set_exemplar_digest(exemplars.digest());
   PatchSet patches;  // the state that carries over from frame to frame
   std::shared_ptr<const Frame> prev;
   if (resume.index >= 0 && !todo.empty()) {

@@ -102,7 +102,9 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
   s.first_mesh = meshes.path(frames.front());
   MeshFile file;
   try {
-    file = read_mesh_file(s.first_mesh);
+    // With the attributes the layer rules read: a name the frames lack
+    // is refused before anything is baked.
+    file = read_mesh_file(s.first_mesh, true, frame_source(o).attributes);
   } catch (const InputError& e) {
     throw e.with_frame(frames.front());
   }
@@ -125,9 +127,20 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
     }
     s.growth = largest / first_bytes;
   }
-  s.color = read_image_header(o.exemplar_color);
-  if (!o.exemplar_feature.empty()) s.feature = read_image_header(o.exemplar_feature);
-  if (!o.exemplar_displacement.empty()) s.displacement = read_image_header(o.exemplar_displacement);
+  if (o.layers.empty()) {
+    s.color = read_image_header(o.exemplar_color);
+    if (!o.exemplar_feature.empty()) s.feature = read_image_header(o.exemplar_feature);
+    if (!o.exemplar_displacement.empty()) s.displacement = read_image_header(o.exemplar_displacement);
+    return s;
+  }
+  for (const ExemplarLayer& layer : o.layers) {
+    BakeInputSizes::Layer& l = s.layers.emplace_back();
+    l.color_path = layer.color, l.feature_path = layer.feature, l.displacement_path = layer.displacement;
+    l.color = read_image_header(layer.color);
+    if (!layer.feature.empty()) l.feature = read_image_header(layer.feature);
+    if (!layer.displacement.empty()) l.displacement = read_image_header(layer.displacement);
+  }
+  s.color = s.layers[0].color, s.feature = s.layers[0].feature, s.displacement = s.layers[0].displacement;
   return s;
 }
 
@@ -171,9 +184,13 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
 
   e.meshes = kFramesInFlight * kTriangleBytes * double(s.triangles) * s.growth;
 
-  const double pixels = double(s.color.width) * double(s.color.height);
-  e.exemplar = s.color.decoded_bytes() + s.feature.decoded_bytes() + s.displacement.decoded_bytes() +
-               pixels * kExemplarPixelBytes;
+  const auto exemplar_bytes = [](const ImageHeader& color, const ImageHeader& feature, const ImageHeader& disp) {
+    return color.decoded_bytes() + feature.decoded_bytes() + disp.decoded_bytes() +
+           double(color.width) * double(color.height) * kExemplarPixelBytes;
+  };
+  e.exemplar = exemplar_bytes(s.color, s.feature, s.displacement);
+  for (std::size_t l = 1; l < s.layers.size(); ++l)
+    e.exemplar += exemplar_bytes(s.layers[l].color, s.layers[l].feature, s.layers[l].displacement);
   e.base = kBaseBytes;
   e.total = e.atlas + e.tracking + e.patch_bytes + e.state + e.seeding + e.meshes + e.exemplar + e.base;
   return e;
@@ -186,10 +203,15 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
                                          area_text(s.area), s.first_mesh);
   // Each image on its own first, so that the message names the file whose
   // header is absurd (a 1 KB PNG that claims 100000x100000).
-  check_image_budget(o.exemplar_color, s.color, 4.0 * s.color.channels + kExemplarPixelBytes, budget);
-  if (s.feature.width > 0) check_image_budget(o.exemplar_feature, s.feature, 4.0 * s.feature.channels + 8, budget);
-  if (s.displacement.width > 0)
-    check_image_budget(o.exemplar_displacement, s.displacement, 4.0 * s.displacement.channels + 8, budget);
+  std::vector<BakeInputSizes::Layer> images = s.layers;
+  if (images.empty())
+    images.push_back({o.exemplar_color, o.exemplar_feature, o.exemplar_displacement, s.color, s.feature, s.displacement});
+  for (const BakeInputSizes::Layer& l : images) {
+    check_image_budget(l.color_path, l.color, 4.0 * l.color.channels + kExemplarPixelBytes, budget);
+    if (l.feature.width > 0) check_image_budget(l.feature_path, l.feature, 4.0 * l.feature.channels + 8, budget);
+    if (l.displacement.width > 0)
+      check_image_budget(l.displacement_path, l.displacement, 4.0 * l.displacement.channels + 8, budget);
+  }
   if (e.covering_patches > kMaxPatches)
     throw UsageError(fmt::format("--{} would need {:.2g} patches (more than {:.0e}){}", radius, e.covering_patches,
                                  kMaxPatches,
@@ -214,8 +236,10 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
                    format_bytes(e.patch_bytes + e.state + e.seeding))},
       {e.meshes, fmt::format("{}: {} triangles per frame: {} for the frames in flight", s.first_mesh, s.triangles,
                              format_bytes(e.meshes))},
-      {e.exemplar, fmt::format("--exemplar {}: {}x{} pixels: {}", o.exemplar_color, s.color.width, s.color.height,
-                               format_bytes(e.exemplar))},
+      {e.exemplar, s.layers.size() > 1
+                       ? fmt::format("--layer: {} exemplars: {}", s.layers.size(), format_bytes(e.exemplar))
+                       : fmt::format("--exemplar {}: {}x{} pixels: {}", images[0].color_path, s.color.width,
+                                     s.color.height, format_bytes(e.exemplar))},
   };
   const Part& top = *std::max_element(std::begin(parts), std::end(parts),
                                       [](const Part& a, const Part& b) { return a.bytes < b.bytes; });

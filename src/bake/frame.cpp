@@ -40,7 +40,7 @@ FrameInput read_frame_input(const FrameSource& source, int frame) {
   in.path = FramePattern(source.mesh_pattern).path(frame);
   MeshFile file;
   try {
-    file = read_mesh_file(in.path);
+    file = read_mesh_file(in.path, true, source.attributes);
   } catch (const InputError& e) {
     throw e.with_frame(frame);
   }
@@ -59,6 +59,7 @@ FrameInput read_frame_input(const FrameSource& source, int frame) {
   }
   if (!source.units_ok) check_frame_units(in.path, frame, file, !in.grid, in.grid.get());
   in.mesh = std::move(file.mesh);
+  in.attributes = std::move(file.attributes);
   return in;
 }
 
@@ -71,6 +72,7 @@ std::unique_ptr<Frame> frame_from_input(FrameInput in) {
   f->mesh = std::move(in.mesh);
   f->surface = std::make_unique<SurfaceQuery>(f->mesh);
   f->velocity_grid = std::move(in.grid);
+  f->attributes = std::move(in.attributes);
   return f;
 }
 

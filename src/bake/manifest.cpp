@@ -120,6 +120,8 @@ BakeManifest make_bake_manifest(const BakeOptions& o, const std::vector<int>& fr
   for (const BakeOption& option : bake_option_table())
     if (option.kind == OptionKind::Path && !option.manifest_key.empty())
       option.set(m.options, absolute_or_empty(option.get(o)));
+  for (ExemplarLayer& layer : m.options.layers)
+    for (std::string* path : {&layer.color, &layer.feature, &layer.displacement}) *path = absolute_or_empty(*path);
   return m;
 }
 

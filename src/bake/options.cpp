@@ -248,6 +248,75 @@ std::vector<BakeOption> make_table() {
     o.example = "maps/rock.disp.exr";
   }
 
+  {
+    BakeOption& o = in(t.add("layer", OptionKind::Text), S::Exemplar, E::Picture,
+                       "An exemplar layer NAME=COLOR[,FEATURE[,DISP]] (repeatable; the files as with --exemplar): "
+                       "with --where, the layers' rules choose one where each patch is born; the last is the "
+                       "default (docs/layers.md)");
+    o.get = [](const BakeOptions& b) {
+      std::string text;
+      for (const ExemplarLayer& l : b.layers) text += (text.empty() ? "" : ";") + layer_text(l);
+      return text;
+    };
+    // Each layer replaces the one of its name (a render's swap) or comes
+    // last; ';' separates several in one text; an empty text clears them.
+    o.set = [](BakeOptions& b, const std::string& t) {
+      if (t.empty()) b.layers.clear();
+      for (std::size_t at = 0; at < t.size();) {
+        const std::size_t end = std::min(t.find(';', at), t.size());
+        ExemplarLayer layer = parse_layer(t.substr(at, end - at));
+        auto same = std::find_if(b.layers.begin(), b.layers.end(), [&](const ExemplarLayer& l) { return l.name == layer.name; });
+        if (same != b.layers.end())
+          *same = std::move(layer);
+        else
+          b.layers.push_back(std::move(layer));
+        at = end + 1;
+      }
+    };
+    o.repeatable = true;
+    o.manifest_key = "exemplar/layers";
+    o.absent = "";
+    o.example = "foam=/maps/foam.png;calm=/maps/calm.png,/maps/calm.feature.png";  // absolute: as recorded
+  }
+  {
+    BakeOption& o = in(t.add("where", OptionKind::Text), S::Exemplar, E::Animation,
+                       "A layer's rule NAME:RULE (repeatable), e.g. 'foam:speed > 1.5 and curvature > 20': over "
+                       "speed (m/s), curvature (1/m) and the PLY's vertex properties by name (docs/layers.md)");
+    o.get = [](const BakeOptions& b) {
+      std::string text;
+      for (const auto& [name, rule] : b.layer_rules) text += (text.empty() ? "" : ";") + name + ":" + rule;
+      return text;
+    };
+    o.set = [](BakeOptions& b, const std::string& t) {
+      if (t.empty()) b.layer_rules.clear();
+      for (std::size_t at = 0; at < t.size();) {
+        const std::size_t end = std::min(t.find(';', at), t.size());
+        auto rule = parse_layer_rule(t.substr(at, end - at));
+        auto same = std::find_if(b.layer_rules.begin(), b.layer_rules.end(), [&](const auto& r) { return r.first == rule.first; });
+        if (same != b.layer_rules.end())
+          *same = std::move(rule);
+        else
+          b.layer_rules.push_back(std::move(rule));
+        at = end + 1;
+      }
+    };
+    o.repeatable = true;
+    o.manifest_key = "layer_rules";
+    o.absent = "";
+    o.example = "foam:speed > 1.5";
+  }
+  {
+    BakeOption& o = in(t.integer<int>("layer-switch", [](BakeOptions& b) -> auto& { return b.layer_switch; }),
+                       S::Exemplar, E::Animation,
+                       "Frames in a row a patch's centre lies where the rules choose another layer before it is "
+                       "retired for that layer's patches (the lag of a changing region)");
+    o.unit = "frames";
+    o.range = {1, 1000};
+    o.manifest_key = "settings/layer_switch";
+    o.absent = "6";
+    o.example = "3";
+  }
+
   // Output
   {
     BakeOption& o = in(t.string("out", OptionKind::Path, [](BakeOptions& b) -> auto& { return b.out_dir; }),

@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -66,6 +67,19 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
   const BakeManifest tracked = read_bake_manifest(r.dir, r.name);
   const std::string tracked_path = bake_manifest_path(tracked.dir, tracked.name);
   BakeOptions o = bake_options_from_manifest(tracked);
+  if (!r.exemplar_color.empty() && !o.layers.empty())
+    throw UsageError("--exemplar: " + tracked_path + " was tracked with exemplar layers; swap one with --layer NAME=...");
+  for (const ExemplarLayer& swap : r.layers) {
+    auto at = std::find_if(o.layers.begin(), o.layers.end(), [&](const ExemplarLayer& l) { return l.name == swap.name; });
+    if (at == o.layers.end()) {
+      std::string names;
+      for (const ExemplarLayer& l : o.layers) names += (names.empty() ? "" : ", ") + l.name;
+      throw UsageError("--layer " + swap.name + ": " + tracked_path + " has no layer '" + swap.name + "'" +
+                       (names.empty() ? std::string(" (it was tracked with one exemplar: use --exemplar)")
+                                      : " (its layers: " + names + ")"));
+    }
+    *at = swap;
+  }
   if (!r.exemplar_color.empty()) {
     o.exemplar_color = r.exemplar_color;
     o.exemplar_feature = r.exemplar_feature;
@@ -95,14 +109,19 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
   o.frames = FrameRange{frames.front(), frames.back()};
   resolve_bake_options(o);  // the memory check; radius and resolution are set
 
-  const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
-  const std::string digest = exemplar_feature_digest(exemplar.feature);
-  if (!tracked.feature_digest.empty() && tracked.feature_digest != digest)
-    throw InputError(o.exemplar_feature.empty() ? o.exemplar_color : o.exemplar_feature,
-                     "this exemplar's feature map (digest " + digest + ") is not the one the patches of " +
-                         tracked_path + " were tracked with (" + tracked.feature_digest +
-                         "): its erosion would differ; give the tracked feature map with --feature, or track again");
-  const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
+  const BakeExemplars exemplars = load_bake_exemplars(o);
+  const std::string digest = exemplars.feature_digest();
+  if (!tracked.feature_digest.empty() && tracked.feature_digest != digest) {
+    if (o.layers.empty())
+      throw InputError(o.exemplar_feature.empty() ? o.exemplar_color : o.exemplar_feature,
+                       "this exemplar's feature map (digest " + digest + ") is not the one the patches of " +
+                           tracked_path + " were tracked with (" + tracked.feature_digest +
+                           "): its erosion would differ; give the tracked feature map with --feature, or track again");
+    throw InputError(tracked_path, "the layers' feature maps (" + digest + ") are not the ones the patches were " +
+                                       "tracked with (" + tracked.feature_digest +
+                                       "): their erosion would differ; swap a layer only for one with its feature map");
+  }
+  const ExemplarLayers textures = exemplars.layers();
 
   detail::prepare_output_folder(o);  // also rid of the temporaries of killed runs
   std::error_code ec;
@@ -137,8 +156,9 @@ void render(const RenderOptions& r, const std::function<void(const RenderedFrame
     if (!keep) write_bake_manifest(out, out_path);
   }
 
-  const FrameSource source = frame_source(o);  // meshes only (load_frame_surface)
-  const std::string digest_of_exemplar = exemplar_digest(exemplar);
+  FrameSource source = frame_source(o);  // meshes only (load_frame_surface)
+  source.attributes.clear();             // the layers are in the states
+  const std::string digest_of_exemplar = exemplars.digest();
   std::vector<std::string> missing;
   std::vector<std::pair<std::string, std::string>> refused;  // file, why
   std::map<int, std::string> reasons;                        // why a frame on disk is rendered again

@@ -70,6 +70,7 @@ struct Decoder {
 }  // namespace
 
 std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches) {
+  const bool layered = s.layers > 1;
   Encoder e;
   e.put(patches.next_id);
   e.put(uint64_t(patches.patches.size()));
@@ -80,6 +81,10 @@ std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches)
     e.put(p.center_normal);
     e.put(p.center_uv);
     e.put(uint8_t(p.at_rest));
+    if (layered) {
+      e.put(p.layer);
+      e.put(p.layer_off);
+    }
     e.put(uint64_t(p.positions.size()));
     e.put(uint64_t(p.triangles.size()));
     e.put(uint64_t(p.held.size()));
@@ -105,6 +110,7 @@ std::string encode_bake_state(const BakeStateHeader& s, const PatchSet& patches)
                            {"payload_bytes", e.bytes.size()},
                            {"stats", s.stats_line.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json::parse(s.stats_line)}};
   if (s.mesh) header["mesh"] = {{"file", s.mesh->file}, {"bytes", s.mesh->bytes}, {"crc32", s.mesh->crc}};
+  if (layered) header["layers"] = s.layers;
   std::string bytes = header.dump() + "\n";
   bytes += e.bytes;
   const uint32_t crc = crc_of(bytes.data(), bytes.size());
@@ -191,6 +197,11 @@ BakeState parse_bake_state(const std::string& bytes, const std::string& path) {
       s.mesh = InputStamp{m.at("file").get<std::string>(), whole_number<uint64_t>(m.value("bytes", nlohmann::json()), "mesh.bytes", path),
                           whole_number<uint32_t>(m.value("crc32", nlohmann::json()), "mesh.crc32", path)};
     }
+    if (header.contains("layers")) {
+      s.layers = whole_number<int>(header.at("layers"), "layers", path);
+      if (s.layers < 2 || s.layers > 255)
+        throw InputError(path, "bad state header: 'layers' must be from 2 to 255, not " + std::to_string(s.layers));
+    }
     header_patches = whole_number<uint64_t>(header.at("patches"), "patches", path);
     header_next_id = whole_number<uint32_t>(header.at("next_id"), "next_id", path);
     const std::size_t payload = whole_number<std::size_t>(header.at("payload_bytes"), "payload_bytes", path);
@@ -216,6 +227,13 @@ BakeState parse_bake_state(const std::string& bytes, const std::string& path) {
     p.center_normal = d.get<Vec3>();
     p.center_uv = d.get<Vec2>();
     p.at_rest = d.get<uint8_t>() != 0;
+    if (s.layers > 1) {
+      p.layer = d.get<uint16_t>();
+      p.layer_off = d.get<uint16_t>();
+      if (p.layer >= s.layers)
+        throw InputError(path, "damaged state: patch " + std::to_string(p.id) + " has layer " + std::to_string(p.layer) +
+                                   " of " + std::to_string(s.layers));
+    }
     const uint64_t nv = d.get<uint64_t>(), nt = d.get<uint64_t>(), nh = d.get<uint64_t>();
     d.get_array(p.positions, nv);
     d.get_array(p.rest_uv, nv);

@@ -24,7 +24,7 @@ namespace fs = std::filesystem;
 namespace {
 
 nlohmann::json stats_json(const FrameStats& s) {
-  return {{"frame", s.frame},
+  nlohmann::json j = {{"frame", s.frame},
           {"triangles", s.triangles},
           {"vertices", s.vertices},
           {"velocity", s.velocity_source},
@@ -53,6 +53,8 @@ nlohmann::json stats_json(const FrameStats& s) {
                        {"track_resolve", s.tracking.seconds_resolve}, {"track_retire", s.tracking.seconds_retire},
                        {"total", s.seconds_total}}},
           {"peak_rss_mb", s.peak_rss_mb}};
+  if (s.layered) j["deaths"]["other_layer"] = s.retired_layer;
+  return j;
 }
 
 }  // namespace
@@ -132,7 +134,9 @@ double FrameWriter::write_files(const Job& w) const {
       ExrCompression lossless = o.exr.compression;
       if (lossless == ExrCompression::Dwaa) lossless = ExrCompression::Zip;
       if (lossless == ExrCompression::Rle) lossless = ExrCompression::None;
-      write_exr(names_.frame_file("aov", f), w.textures.aov, {"patch_id", "u", "v", "w"},
+      std::vector<std::string> channels = {"patch_id", "u", "v", "w"};
+      if (w.textures.aov.channels == 5) channels.push_back("layer");  // exemplar layers: the patch's
+      write_exr(names_.frame_file("aov", f), w.textures.aov, channels,
                 {ExrPixelType::Float, lossless}, &staged);
     });
   jobs.push_back([&] {
@@ -275,6 +279,7 @@ void FrameWriter::write(const std::shared_ptr<Frame>& frame, const PatchSet& pat
     header.name = options_.name;
     header.frame = frame->number;
     header.options_checksum = options_checksum_;
+    header.layers = int(std::max<std::size_t>(1, options_.layers.size()));
     header.stats_line = stats_line_without_timings(frame->stats);
     header.mesh = stamp_input_file(FramePattern(options_.mesh_pattern).path(frame->number));
     job->state = encode_bake_state(header, patches);

@@ -336,8 +336,10 @@ int find_prop(const PlyElement& e, std::initializer_list<const char*> names) {
   return -1;
 }
 
-/// Property slots of the vertex element: 0-2 position, 3-5 velocity, -1 skip.
-std::vector<int> vertex_slots(const std::string& path, const PlyElement& e, bool& has_velocity) {
+/// Property slots of the vertex element: 0-2 position, 3-5 velocity, 6 + j
+/// attribute j, -1 skip.
+std::vector<int> vertex_slots(const std::string& path, const PlyElement& e, bool& has_velocity,
+                              const std::vector<std::string>& attributes) {
   std::vector<int> slot(e.props.size(), -1);
   const char* axes[3] = {"x", "y", "z"};
   for (int k = 0; k < 3; ++k) {
@@ -360,13 +362,31 @@ std::vector<int> vertex_slots(const std::string& path, const PlyElement& e, bool
     has_velocity = true;
     break;
   }
+  for (std::size_t j = 0; j < attributes.size(); ++j) {
+    int i = -1;
+    for (std::size_t k = 0; k < e.props.size() && i < 0; ++k)
+      if (e.props[k].name == attributes[j]) i = int(k);
+    if (i < 0) {
+      std::string have;
+      for (const PlyProperty& p : e.props) have += (have.empty() ? "" : " ") + p.name;
+      throw InputError(path, "PLY vertex element has no property " + quote_token(attributes[j]) + " (it has: " + have + ")");
+    }
+    if (e.props[i].is_list)
+      throw InputError(path, "PLY vertex property " + quote_token(attributes[j]) + " is a list, expected a number");
+    if (slot[i] >= 0 && slot[i] < 6)
+      throw InputError(path, "PLY vertex property " + quote_token(attributes[j]) +
+                                 " is a position or velocity component, not an attribute (use speed)");
+    slot[i] = 6 + int(j);
+  }
   for (std::size_t i = 0; i < slot.size(); ++i)
     if (slot[i] >= 0 && e.props[i].is_list)
       throw InputError(path, "PLY vertex property '" + e.props[i].name + "' is a list, expected a number");
   return slot;
 }
 
-TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo* declared) {
+TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo* declared,
+                 const std::vector<std::string>& attributes = {},
+                 std::vector<std::vector<float>>* attribute_values = nullptr) {
   const PlyHeader h = parse_ply_header(path, data);
   PlyData in(path, data, h);
   TriMesh m;
@@ -377,7 +397,7 @@ TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo*
       seen_vertex = true;
       if (e.count > uint64_t(INT32_MAX)) throw InputError(path, "PLY has more vertices than lapflow supports (2^31)");
       bool has_velocity = false;
-      const std::vector<int> slot = vertex_slots(path, e, has_velocity);
+      const std::vector<int> slot = vertex_slots(path, e, has_velocity, attributes);
       if (declared) {
         for (int want = 0; want < 6; ++want)
           for (std::size_t k = 0; k < slot.size(); ++k)
@@ -390,7 +410,10 @@ TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo*
       const std::size_t cap = std::min<uint64_t>(e.count, data.size());
       m.positions.reserve(cap);
       if (has_velocity) m.velocities.reserve(cap);
-      double v[6] = {0, 0, 0, 0, 0, 0};
+      std::vector<double> v(6 + attributes.size(), 0.0);
+      if (attribute_values) attribute_values->assign(attributes.size(), {});
+      if (attribute_values)
+        for (auto& column : *attribute_values) column.reserve(cap);
       for (uint64_t i = 0; i < e.count; ++i) {
         in.at(e.name, i, e.count);
         for (std::size_t k = 0; k < e.props.size(); ++k) {
@@ -411,6 +434,13 @@ TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo*
           if (!is_finite(vel))
             throw InputError(path, "vertex " + std::to_string(i) + ": velocity is " + non_finite_word(vel));
           m.velocities.push_back(vel);
+        }
+        for (std::size_t j = 0; j < attributes.size(); ++j) {
+          const double a = v[6 + j];
+          if (!std::isfinite(float(a)))
+            throw InputError(path, "vertex " + std::to_string(i) + ": property " + quote_token(attributes[j]) + " is " +
+                                       (std::isnan(a) ? "NaN" : "not a finite float"));
+          if (attribute_values) (*attribute_values)[j].push_back(float(a));
         }
       }
     } else if (e.name == "face" && face_of_triangle.empty()) {
@@ -628,13 +658,18 @@ void check_mesh_bounds(const TriMesh& mesh, const std::string& path) {
 
 namespace {
 
-TriMesh parse_mesh(const std::string& data, const std::string& path, MeshFileInfo* declared) {
+TriMesh parse_mesh(const std::string& data, const std::string& path, MeshFileInfo* declared,
+                   const std::vector<std::string>& attributes = {},
+                   std::vector<std::vector<float>>* attribute_values = nullptr) {
   const std::string ext = lower(fs::path(path).extension().string());
-  if (ext == ".ply") return read_ply(path, data, declared);
-  if (ext == ".obj") return read_obj(path, data);
-  // Unknown extension: trust the content when it says PLY.
-  if (data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r'))
-    return read_ply(path, data, declared);
+  const bool ply_magic = data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r');
+  if (ext == ".ply" || (ext != ".obj" && ply_magic)) return read_ply(path, data, declared, attributes, attribute_values);
+  if (ext == ".obj") {
+    if (!attributes.empty())
+      throw InputError(path, "an OBJ has no vertex properties: the attribute " + quote_token(attributes[0]) +
+                                 " needs PLY frames");
+    return read_obj(path, data);
+  }
   throw InputError(path, "unknown mesh format " + quote_token(ext) + " (lapflow reads .ply and .obj)");
 }
 
@@ -646,14 +681,31 @@ TriMesh read_mesh_from_memory(const std::string& data, const std::string& path) 
   return mesh;
 }
 
-MeshFile read_mesh_file(const std::string& path, bool check_bounds) {
+MeshFile read_mesh_file(const std::string& path, bool check_bounds, const std::vector<std::string>& attributes) {
   MeshFile f;
-  f.mesh = parse_mesh(load_file(path), path, &f.declared);
+  f.mesh = parse_mesh(load_file(path), path, &f.declared, attributes, &f.attributes);
   if (check_bounds) check_mesh_bounds(f.mesh, path);
   return f;
 }
 
 TriMesh read_mesh(const std::string& path) { return read_mesh_file(path).mesh; }
+
+std::vector<std::string> mesh_vertex_property_names(const std::string& path) {
+  const std::string data = load_file(path);
+  const bool ply_magic = data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r');
+  if (!ply_magic) return {};
+  const PlyHeader h = parse_ply_header(path, data);
+  std::vector<std::string> names;
+  for (const PlyElement& e : h.elements) {
+    if (e.name != "vertex") continue;
+    bool has_velocity = false;
+    const std::vector<int> slot = vertex_slots(path, e, has_velocity, {});
+    for (std::size_t k = 0; k < e.props.size(); ++k)
+      if (slot[k] < 0 && !e.props[k].is_list) names.push_back(e.props[k].name);
+    break;
+  }
+  return names;
+}
 
 std::vector<std::string> units_problems(const TriMesh& mesh, const MeshFileInfo& declared, bool check_velocity) {
   std::vector<std::string> problems;

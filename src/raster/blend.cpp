@@ -14,7 +14,7 @@
 
 namespace lapflow::detail {
 
-void blend_patch(RasterContext& ctx, std::size_t patch_index, std::vector<BlendSample>& samples) {
+void blend_patch(RasterContext& ctx, std::size_t patch_index, const LayerMaps& layer, std::vector<BlendSample>& samples) {
   // One sample per texel: the lowest patch triangle (shared edges and the
   // seam fallback may draw a texel twice; a folded patch covers it twice).
   std::sort(samples.begin(), samples.end(), [](const BlendSample& a, const BlendSample& b) {
@@ -38,7 +38,7 @@ void blend_patch(RasterContext& ctx, std::size_t patch_index, std::vector<BlendS
       continue;
     }
     float c[4];
-    sample(*B.mips, s.u, s.v, B.lod, c, B.trilinear);
+    sample(layer.exemplar->mips, s.u, s.v, layer.lod, c, B.trilinear);
     int64_t* sum = &B.sums[std::size_t(s.texel) * 5];
     std::atomic_ref<int64_t>(sum[0]).fetch_add(std::llround(w * kBlendScale), std::memory_order_relaxed);
     for (int ch = 0; ch < 4; ++ch) {

@@ -160,6 +160,7 @@ void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
   const int N = ctx.N;
   // Every pixel outside the charts copies its nearest chart pixel's colour
   // (alpha stays 0), displacement and AOV.
+  const std::size_t ac = std::size_t(std::max(out.aov.channels, 1));  // patch_id u v w (layer)
   if (options.dilate && tm.size() > 0) {
     std::vector<int32_t>& source = ctx.index;  // reused: the raster steps are done with it
     parallel_for(source.size(), [&](std::size_t b, std::size_t e) {
@@ -179,13 +180,16 @@ void dilate_gutter(RasterBuffers& r, FrameTextures& out) {
         copy_images(out.color_half.bits, out.displacement_half.bits, i, std::size_t(s));
         copy_images(out.color.pixels, out.displacement.pixels, i, std::size_t(s));
         if (options.aov)
-          for (int k = 0; k < 4; ++k) out.aov.pixels[i * 4 + k] = out.aov.pixels[std::size_t(s) * 4 + k];
+          for (std::size_t k = 0; k < ac; ++k) out.aov.pixels[i * ac + k] = out.aov.pixels[std::size_t(s) * ac + k];
       }
     }, 1 << 14);
   } else if (options.aov) {
     // Outside charts the AOV says "no patch".
     for (std::size_t i = 0; i < ctx.index.size(); ++i)
-      if (ctx.index[i] < 0) out.aov.pixels[i * 4] = -1.f;
+      if (ctx.index[i] < 0) {
+        out.aov.pixels[i * ac] = -1.f;
+        if (ac == 5) out.aov.pixels[i * ac + 4] = -1.f;
+      }
   }
   // Dilation reuses the pixel index: the buffers are spent.
   r.context.reset();

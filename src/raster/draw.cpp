@@ -67,8 +67,8 @@ inline const uint64_t* rest_ground(const RasterContext& ctx, std::size_t p) {
 // every texel: the same decisions, without a feature-map lookup per texel.
 // The slack covers the texels' barycentrics (kInsideTol outside the
 // triangle) and the bilinear weights' rounding.
-uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3], double slope) {
-  if (ctx.mode != RasterMode::Erosion || ctx.erosion_min.empty()) return 0;
+uint8_t sure_passes(const RasterContext& ctx, const LayerMaps& layer, const Vec2 uv[3], const float w[3], double slope) {
+  if (ctx.mode != RasterMode::Erosion || layer.erosion_min.empty()) return 0;
   constexpr double kUvSlack = 1e-7, kWSlack = 1e-6, kFScale = 1 - 1e-5;
   const double ua = std::min({uv[0].x, uv[1].x, uv[2].x}) - kUvSlack, ub = std::max({uv[0].x, uv[1].x, uv[2].x}) + kUvSlack;
   const double va = std::min({uv[0].y, uv[1].y, uv[2].y}) - kUvSlack, vb = std::max({uv[0].y, uv[1].y, uv[2].y}) + kUvSlack;
@@ -88,14 +88,14 @@ uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3]
   };
   uint8_t sure = 0;
   {
-    const ErosionMap& map = ctx.erosion;
-    const double f = f_min(ctx.erosion_min, map.feature);
+    const ErosionMap& map = layer.erosion();
+    const double f = f_min(layer.erosion_min, map.feature);
     if (f >= 0 && std::sqrt(f + std::max(0.0, D_min)) * map.inv_max - map.epsilon >= 1.0 - w_min) sure |= kSureKeeps;
   }
-  if (ctx.hold && !ctx.held_min.empty()) {
-    const ErosionMap& held = ctx.held_erosion;
+  if (ctx.hold && !layer.held_min.empty()) {
+    const ErosionMap& held = layer.held_erosion;
     const double r = ctx.held_reach;
-    const double f = f_min(ctx.held_min, held.feature);
+    const double f = f_min(layer.held_min, held.feature);
     const double D = std::min(1.0, std::max(0.0, D_min) + 2 * r);
     if (f >= 0 && std::sqrt(f + D) * held.inv_max - held.epsilon >= 1.0 - std::min(1.0, w_min + slope * r) - ctx.options.hold_margin)
       sure |= kSureHeld;
@@ -133,9 +133,9 @@ inline bool passes(const RasterContext& ctx, const Patch& patch, const uint64_t*
   if (ctx.hold && held_at(patch.held, u, v)) {
     if (sure & kSureHeld) return true;
     const double r = ctx.held_reach;
-    return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
+    return keeps_held(ctx.layer_of(patch).held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
-  if (!(sure & kSureKeeps) && !keeps(ctx.erosion, u, v, w, ctx.mode)) return false;
+  if (!(sure & kSureKeeps) && !keeps(ctx.layer_of(patch).erosion(), u, v, w, ctx.mode)) return false;
   return !ground || held_at(ground, u, v) || !interior_texel(ctx, std::size_t(idx), x, y);
 }
 
@@ -194,7 +194,8 @@ bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t,
   const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
   const float wv[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
   const double r = ctx.held_reach;
-  return keeps_held(ctx.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + weight_slope(uv, wv) * r));
+  return keeps_held(ctx.layer_of(patch).held_erosion, r, ctx.options.hold_margin, u, v,
+                    std::min(1.0, w + weight_slope(uv, wv) * r));
 }
 
 namespace {
@@ -538,7 +539,7 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
-      if (t.sure == kSureUnknown) t.sure = sure_passes(ctx, t.uv, t.w, t.slope);
+      if (t.sure == kSureUnknown) t.sure = sure_passes(ctx, ctx.layer_of(patch), t.uv, t.w, t.slope);
       if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, t.slope, t.sure)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
@@ -731,7 +732,7 @@ void rasterize_patch(RasterContext& ctx, const Patch& patch, std::size_t patch_i
   samples.clear();
   SampleSink sink{samples};
   rasterize_patch_into(ctx, sink, patch, patch_index, counters);
-  blend_patch(ctx, patch_index, samples);
+  blend_patch(ctx, patch_index, ctx.layer_of(patch), samples);
 }
 
 bool winner_pixels(const RasterContext& ctx, const Patch& patch, int ti, int texel_tri, Vec2 out[3],
@@ -770,6 +771,10 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   RasterStats& st = r.stats;
   const std::size_t np = patches.patches.size();
   if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize: too many patches");
+  for (const Patch& patch : patches.patches)
+    if (patch.layer >= ctx.layers.size())
+      throw std::invalid_argument("rasterize: patch " + std::to_string(patch.id) + " has layer " +
+                                  std::to_string(patch.layer) + " of " + std::to_string(ctx.layers.size()));
   if (ctx.mode == RasterMode::Blend) ctx.blend.contributed.assign(np, 0);
   bind_rest_ground(ctx, patches);
   // Every patch triangle, any order (the atomic min decides).

@@ -52,8 +52,6 @@ inline constexpr double kBlendScale = 4294967296.0;  // 2^32
 inline constexpr double kBlendMinWeight = 1e-3;
 inline constexpr int64_t kBlendMinFixed = int64_t(kBlendMinWeight * kBlendScale);
 struct BlendState {
-  const ExemplarMips* mips = nullptr;
-  double lod = 0;
   bool trilinear = true;
   /// 1: sample and sum every covering patch; 2: write ctx.keys of the texels'
   /// largest-weight patches (the AOV winners).
@@ -79,14 +77,30 @@ struct TrianglePixelMap {
   bool ok = false;               // not degenerate
 };
 
+/// What the raster reads of one exemplar layer (Patch::layer): its mips and
+/// erosion map, and the tables built from them for this atlas.
+struct LayerMaps {
+  const RasterExemplar* exemplar = nullptr;
+  /// RasterOptions::hold (Erosion mode): the held test's feature map (the
+  /// maximum within RasterContext::held_reach in uv: one atlas texel).
+  ErosionMap held_erosion;
+  /// Minima of exemplar->erosion.feature and held_erosion.feature (Erosion
+  /// mode): a patch triangle whose every texel passes the test is known
+  /// before its pixels are visited (draw.cpp, sure_passes).
+  MinPyramid erosion_min, held_min;
+  double lod = 0;  ///< the exemplar's level of detail on this atlas
+  const ErosionMap& erosion() const { return exemplar->erosion; }
+};
+
 struct RasterContext {
   const TriMesh& mesh;
   const SurfaceAtlas& atlas;
-  const ErosionMap& erosion;
   RasterMode mode;
   double delta_max;
   RasterOptions options;
-  const RasterExemplar* exemplar = nullptr;
+  /// One per exemplar layer, indexed by Patch::layer (one in a bake of one exemplar).
+  std::vector<LayerMaps> layers;
+  const LayerMaps& layer_of(const Patch& patch) const { return layers[patch.layer]; }
   TriangleLocator locate_fn;                ///< owned copy of the caller's locator (may be empty)
   const TriangleLocator* locate = nullptr;  ///< &locate_fn when it is set
   double radius = 0.1;  ///< r (metres)
@@ -106,17 +120,12 @@ struct RasterContext {
   /// next frame, marked by resolve_texels and moved into the patches by
   /// retire_patches (empty when RasterOptions::hold is off).
   std::vector<uint64_t> held_next;
-  /// RasterOptions::hold is on (Erosion mode): the held test's feature map
-  /// (the maximum within `held_reach` in uv: one atlas texel) and reach.
+  /// RasterOptions::hold is on (Erosion mode), and the held test's reach in
+  /// uv (one atlas texel).
   bool hold = false;
   /// Patches from this index on were born in this frame's hole filling.
   std::size_t newborn_from = std::numeric_limits<std::size_t>::max();
-  ErosionMap held_erosion;
   double held_reach = 0;
-  /// Minima of erosion.feature and held_erosion.feature (Erosion mode): a
-  /// patch triangle whose every texel passes the test is known before its
-  /// pixels are visited (draw.cpp, sure_passes).
-  MinPyramid erosion_min, held_min;
   /// RasterOptions::rest_bound: per patch index, the slot of its cells in
   /// `rest_ground` (-1: not bound: outside a render a patch that moves, or
   /// one with no held cell), and there kHeldWords words per bound patch: its
@@ -152,8 +161,8 @@ struct RasterContext {
   /// Blend mode only.
   BlendState blend;
 
-  RasterContext(const TriMesh& m, const SurfaceAtlas& a, const ErosionMap& e, RasterMode mo, double dm)
-      : mesh(m), atlas(a), erosion(e), mode(mo), delta_max(dm) {}
+  RasterContext(const TriMesh& m, const SurfaceAtlas& a, RasterMode mo, double dm)
+      : mesh(m), atlas(a), mode(mo), delta_max(dm) {}
 };
 
 /// The surface point under chart texel i's centre (its fluid triangle at
@@ -201,12 +210,12 @@ inline constexpr uint8_t kSureKeeps = 1, kSureHeld = 2, kSureUnknown = 255;
 /// weights `w` and weight slope `slope` (the held test's) passes, from bounds
 /// over the triangle alone: the same decisions as the texels' own tests
 /// wherever it says so, and 0 outside RasterMode::Erosion.
-uint8_t sure_passes(const RasterContext& ctx, const Vec2 uv[3], const float w[3], double slope);
+uint8_t sure_passes(const RasterContext& ctx, const LayerMaps& layer, const Vec2 uv[3], const float w[3], double slope);
 
 /// Blend mode: the samples of one patch (any order, duplicates allowed; the
 /// lowest patch triangle of each texel counts) added to ctx.blend (phase 1)
 /// or written as AOV winner keys (phase 2). Sorts `samples`.
-void blend_patch(RasterContext& ctx, std::size_t patch_index, std::vector<BlendSample>& samples);
+void blend_patch(RasterContext& ctx, std::size_t patch_index, const LayerMaps& layer, std::vector<BlendSample>& samples);
 /// Blend mode: ctx.keys set to 0 on chart texels whose summed weight covers
 /// them, kNoKey elsewhere (what hole filling reads).
 void blend_mark_coverage(RasterContext& ctx);

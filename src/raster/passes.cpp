@@ -7,7 +7,7 @@
 
 namespace lapflow {
 
-RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplar,
                        const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
                        int frame, const PatchMaker& make_patch, PatchSet& patches) {
   RasterOptions tracking = options;
@@ -30,7 +30,7 @@ RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const Ras
   return std::move(r.stats);
 }
 
-FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplar,
                           const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
                           const PatchSet& patches) {
   RasterOptions output = options;

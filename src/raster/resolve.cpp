@@ -20,7 +20,6 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   RasterContext& ctx = *r.context;
   RasterStats& st = r.stats;
   const RasterOptions& options = ctx.options;
-  const RasterExemplar& exemplar = *ctx.exemplar;
   const SurfaceAtlas& atlas = ctx.atlas;
   const TexelMap& tm = atlas.texels;
   const int N = ctx.N;
@@ -30,6 +29,8 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   // The three images are allocated (zero-filled, page by page) on both
   // cores at once.
   const bool half = options.images && options.half_images;
+  // patch_id, u, v, w, and with more than one exemplar layer the patch's layer.
+  const int aov_channels = ctx.layers.size() > 1 ? 5 : 4;
   auto half_image = [&](int channels) {
     HalfImage h;
     h.width = N, h.height = N, h.channels = channels;
@@ -42,11 +43,11 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
       if (k == 0 && options.images && !half) out.color = Image(N, N, 4);
       if (k == 1 && half) out.displacement_half = half_image(1);
       if (k == 1 && options.images && !half) out.displacement = Image(N, N, 1);
-      if (k == 2 && options.aov) out.aov = Image(N, N, 4);
+      if (k == 2 && options.aov) out.aov = Image(N, N, aov_channels);
     }
   }, 1);
   float fallback[4];  // a texel no patch could reach (a chart hole filling failed on): the exemplar's mean
-  sample(exemplar.mips, 0.5, 0.5, 1e9, fallback);
+  sample(ctx.layers[0].exemplar->mips, 0.5, 0.5, 1e9, fallback);
   std::vector<std::atomic<uint64_t>> won(patches.patches.size());
   for (auto& a : won) a.store(0, std::memory_order_relaxed);
   // A winner's pixel-space triangle, for texels of one chart (same_chart)
@@ -143,7 +144,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
       const int x = int(pix % uint32_t(N)), y = int(pix / uint32_t(N));
       const uint64_t key = ctx.keys[i];
       float s[4] = {fallback[0], fallback[1], fallback[2], fallback[3]};
-      float aov[4] = {-1.f, 0.f, 0.f, 0.f};
+      float aov[5] = {-1.f, 0.f, 0.f, 0.f, -1.f};
       const bool blended = blend && ctx.blend.covered(i);  // else a forced texel: its key's patch extrapolated
       if (key != kNoKey) {
         const std::size_t p = std::size_t(key >> 32);
@@ -180,7 +181,10 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double v = l0 * patch.rest_uv[t[0]].y + l1 * patch.rest_uv[t[1]].y + l2 * patch.rest_uv[t[2]].y;
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
-          if (!blended && options.images) sample(exemplar.mips, u, v, st.lod, s, options.trilinear);
+          if (!blended && options.images) {
+            const LayerMaps& layer = ctx.layer_of(patch);
+            sample(layer.exemplar->mips, u, v, layer.lod, s, options.trilinear);
+          }
           // Only a texel whose 3x3 neighbourhood lies in its chart marks
           // (mark_held): near a seam the texels of two charts sample the same
           // surface at arbitrary offsets, and a cell marked from one chart
@@ -196,7 +200,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
                         !held_test_keeps(ctx, patch, t, u, v, w))) &&
               interior_texel(ctx, i, x, y))
             mark_held(p, u, v, cur->ux, cur->uy);
-          aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w);
+          aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w), aov[4] = float(patch.layer);
         }
         if (p != run_patch) {
           if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);
@@ -219,7 +223,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
         }
       }
       if (options.aov)
-        for (int k = 0; k < 4; ++k) out.aov.pixels[std::size_t(pix) * 4 + k] = aov[k];
+        for (int k = 0; k < aov_channels; ++k) out.aov.pixels[std::size_t(pix) * aov_channels + k] = aov[k];
     }
     if (half) flush(e);
     if (run > 0) won[run_patch].fetch_add(run, std::memory_order_relaxed);

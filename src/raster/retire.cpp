@@ -28,7 +28,7 @@ bool eroded_away(const RasterContext& ctx, const Patch& patch) {
   bool any_drawable = patch.triangle_delta.size() != patch.triangles.size();
   for (std::size_t t = 0; t < patch.triangle_delta.size() && !any_drawable; ++t)
     any_drawable = patch.triangle_delta[t] <= ctx.delta_max;
-  return double(max_w) < ctx.erosion.epsilon || !any_drawable;
+  return double(max_w) < ctx.layers[0].erosion().epsilon || !any_drawable;
 }
 
 

@@ -120,13 +120,22 @@ using namespace detail;
 
 RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
                            const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate) {
+  return begin_raster(mesh, atlas, ExemplarLayers{&exemplar, 1}, options, weights, std::move(locate));
+}
+
+RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplars,
+                           const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate) {
   if (!(options.radius > 0)) throw std::invalid_argument("rasterize: radius must be positive");
-  if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize: exemplar not prepared");
+  if (exemplars.empty() || exemplars.size() > kMaxLayers)
+    throw std::invalid_argument("rasterize: from 1 to " + std::to_string(kMaxLayers) + " exemplar layers");
+  for (const RasterExemplar& exemplar : exemplars)
+    if (exemplar.mips.levels.empty()) throw std::invalid_argument("rasterize: exemplar not prepared");
   RasterBuffers r;
-  r.context = std::make_shared<RasterContext>(mesh, atlas, exemplar.erosion, options.mode, weights.delta_max);
+  r.context = std::make_shared<RasterContext>(mesh, atlas, options.mode, weights.delta_max);
   RasterContext& ctx = *r.context;
   ctx.options = options;
-  ctx.exemplar = &exemplar;
+  ctx.layers.resize(exemplars.size());
+  for (std::size_t l = 0; l < exemplars.size(); ++l) ctx.layers[l].exemplar = &exemplars[l];
   ctx.locate_fn = std::move(locate);
   ctx.locate = ctx.locate_fn ? &ctx.locate_fn : nullptr;
   ctx.radius = options.radius;
@@ -149,25 +158,28 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const
   }
   st.texel_world_size = asum > 0 ? wsum / asum : 0;
   ctx.texel_world_size = st.texel_world_size;
-  const Image& base = exemplar.mips.levels[0];
-  const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
   ctx.hold = options.hold && options.mode == RasterMode::Erosion;
-  if (ctx.hold) {
-    // One atlas texel in uv; the window reaches a pixel further so that the
-    // bilinear lookup of the maximum bounds every lookup within the reach.
-    ctx.held_reach = st.texel_world_size / (2 * options.radius);
-    const Image& F = exemplar.erosion.feature;
-    const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
-    const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
-    ctx.held_erosion = exemplar.erosion;
-    ctx.held_erosion.feature = max_filter(F, kx, ky);
-    ctx.held_min.build(ctx.held_erosion.feature);
+  // One atlas texel in uv.
+  if (ctx.hold) ctx.held_reach = st.texel_world_size / (2 * options.radius);
+  for (LayerMaps& layer : ctx.layers) {
+    const RasterExemplar& exemplar = *layer.exemplar;
+    const Image& base = exemplar.mips.levels[0];
+    const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
+    if (ctx.hold) {
+      // The window reaches a pixel further than the held reach so that the
+      // bilinear lookup of the maximum bounds every lookup within the reach.
+      const Image& F = exemplar.erosion.feature;
+      const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
+      const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
+      layer.held_erosion = exemplar.erosion;
+      layer.held_erosion.feature = max_filter(F, kx, ky);
+      layer.held_min.build(layer.held_erosion.feature);
+    }
+    if (options.mode == RasterMode::Erosion) layer.erosion_min.build(exemplar.erosion.feature);
+    layer.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
   }
-  if (options.mode == RasterMode::Erosion) ctx.erosion_min.build(exemplar.erosion.feature);
-  st.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
+  st.lod = ctx.layers[0].lod;
   if (options.mode == RasterMode::Blend) {
-    ctx.blend.mips = &exemplar.mips;
-    ctx.blend.lod = st.lod;
     ctx.blend.trilinear = options.trilinear;
     ctx.blend.sums.assign(atlas.texels.size() * 5, 0);
     ctx.blend.best.assign(atlas.texels.size(), 0);

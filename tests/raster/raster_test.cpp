@@ -895,7 +895,7 @@ TEST(Raster, SureErosionTestsHoldAtEveryPointOfTheirTriangle) {
       w[i] = float(k % 5 == 0 ? 1.0 : h(10 + i));
     }
     const double slope = 2 * h(13);
-    const uint8_t sure = detail::sure_passes(ctx, uv, w, slope);
+    const uint8_t sure = detail::sure_passes(ctx, ctx.layers[0], uv, w, slope);
     sure_keeps += (sure & detail::kSureKeeps) != 0;
     sure_held += (sure & detail::kSureHeld) != 0;
     neither += sure == 0;
@@ -912,10 +912,10 @@ TEST(Raster, SureErosionTestsHoldAtEveryPointOfTheirTriangle) {
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
       if (sure & detail::kSureKeeps) {
-        ASSERT_TRUE(detail::keeps(ctx.erosion, u, v, wt, ctx.mode)) << "triangle " << k << " point " << s;
+        ASSERT_TRUE(detail::keeps(ctx.layers[0].erosion(), u, v, wt, ctx.mode)) << "triangle " << k << " point " << s;
       }
       if (sure & detail::kSureHeld) {
-        ASSERT_TRUE(detail::keeps_held(ctx.held_erosion, ctx.held_reach, o.hold_margin, u, v,
+        ASSERT_TRUE(detail::keeps_held(ctx.layers[0].held_erosion, ctx.held_reach, o.hold_margin, u, v,
                                        std::min(1.0, wt + slope * ctx.held_reach)))
             << "triangle " << k << " point " << s;
       }

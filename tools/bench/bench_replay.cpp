@@ -55,8 +55,8 @@ void bench_replay(const std::string& dir, int frame_number, int repeats) {
   o.frames = FrameRange{manifest.frames.front(), manifest.frames.back()};
   o.units_ok = true;  // the bake checked them
   resolve_bake_options(o);
-  const Exemplar exemplar = load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
-  const RasterExemplar textures = prepare_raster_exemplar(exemplar, o.raster.epsilon);
+  const BakeExemplars exemplars = load_bake_exemplars(o);
+  const ExemplarLayers layers = exemplars.layers();
   const FrameSource source = frame_source(o);
 
   // The previous frame's state and velocity (none before the first frame:
@@ -89,8 +89,8 @@ void bench_replay(const std::string& dir, int frame_number, int repeats) {
   for (int r = 0; r < repeats; ++r) {
     frame->stats = fresh;
     PatchSet patches = start;
-    track_frame(*frame, previous.get(), patches, textures, o);
-    render_frame(*frame, patches, textures, o);
+    track_frame(*frame, previous.get(), patches, layers, o);
+    render_frame(*frame, patches, layers, o);
     const FrameStats& s = frame->stats;
     const double row[kColumns] = {s.seconds_advect,         s.seconds_weights,          s.seconds_seed,
                                   s.tracking.seconds_draw,  s.tracking.seconds_holes,   s.tracking.seconds_resolve,

@@ -23,8 +23,14 @@ void bake_with_progress(BakeOptions& o) {
   const std::vector<int> frames = resolve_frames(FramePattern(o.mesh_pattern), o.frames);
   const std::string verb = o.track_only ? "track" : "bake";
   info("lapflow {}: {} frames {}-{} of {}", verb, frames.size(), frames.front(), frames.back(), o.mesh_pattern);
+  std::string exemplar = o.exemplar_color;
+  if (!o.layers.empty()) {
+    exemplar = fmt::format("{} layers (", o.layers.size());
+    for (std::size_t l = 0; l < o.layers.size(); ++l) exemplar += (l ? ", " : "") + o.layers[l].name;
+    exemplar += ")";
+  }
   info("  exemplar {} | radius {:.4g} m | atlas {}x{} | tracking texel {:.4g} r | seed {} | {} threads",
-       o.exemplar_color, o.patch.radius, o.atlas.resolution, o.atlas.resolution, o.track_texel, o.seed,
+       exemplar, o.patch.radius, o.atlas.resolution, o.atlas.resolution, o.track_texel, o.seed,
        thread_count_label());
   info("  memory estimate {} (atlas {}, tracking {}, {:.0f} patches {}, meshes {}, exemplar {}) of --max-memory {}",
        format_bytes(memory.total), format_bytes(memory.atlas), format_bytes(memory.tracking), memory.patches,
@@ -54,7 +60,13 @@ namespace {
 void run_bake(BakeOptions& o) {
   apply_global_options();
   o.seed = globals().seed;
-  resolve_exemplar_paths(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
+  if (o.layers.empty()) {
+    resolve_exemplar_paths(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
+  } else {
+    if (!o.exemplar_color.empty())
+      throw UsageError("--exemplar and --layer: with layers, give every exemplar as a --layer");
+    for (ExemplarLayer& layer : o.layers) resolve_exemplar_paths(layer.color, layer.feature, layer.displacement);
+  }
   if (o.name.empty()) o.name = default_output_name(o.mesh_pattern);
   if (o.track_only) o.keep_states = -1;  // render needs every frame's
   bake_with_progress(o);

@@ -12,6 +12,7 @@ struct RenderCli {
   RenderOptions o;
   std::string frames;
   std::string exemplar, feature, displacement;
+  std::vector<std::string> layers;
   bool aov = false, no_aov = false;
   bool usd = false, no_usd = false;
 };
@@ -27,6 +28,14 @@ void run_render(RenderCli& c) {
     resolve_exemplar_paths(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement);
   } else if (!c.feature.empty() || !c.displacement.empty()) {
     throw UsageError("--feature and --displacement go with --exemplar");
+  }
+  for (const std::string& text : c.layers) {
+    BakeOptions scratch = default_bake_options();
+    set_bake_option(scratch, *find_bake_option("layer"), text);
+    for (ExemplarLayer& layer : scratch.layers) {
+      resolve_exemplar_paths(layer.color, layer.feature, layer.displacement);
+      o.layers.push_back(layer);
+    }
   }
   if (c.aov) o.aov = true;
   if (c.no_aov) o.aov = false;
@@ -81,6 +90,13 @@ void add_render_command(CLI::App& app) {
   add_table_flag(*cmd, "exemplar", [](const std::string& t) { c.exemplar = t; },
                  "(default: the manifest's). Its feature map must be the tracked one");
   add_table_flag(*cmd, "feature", [](const std::string& t) { c.feature = t; }, "(with --exemplar)");
+  cmd->add_option("--layer", c.layers,
+                  "A tracked layer's exemplar swapped, NAME=COLOR[,FEATURE[,DISP]] (repeatable; its feature map "
+                  "must be the tracked one)")
+      ->type_name("NAME=FILES")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+      ->allow_extra_args(false)
+      ->group("Exemplar");
   add_table_flag(*cmd, "displacement", [](const std::string& t) { c.displacement = t; }, "(with --exemplar)");
   cmd->add_option("--out", c.o.out_dir, "Output folder (default: the tracked folder)")->group("Output");
   add_table_flag(*cmd, "aov", [](const std::string& t) { c.aov = t == "true"; }, "(default: as the manifest says)");

@@ -56,6 +56,16 @@ void add_bake_table_flags(CLI::App& cmd, BakeOptions& o) {
           names, [&o, entry](std::int64_t count) { apply(o, *entry, count > 0 ? "true" : "false"); },
           help_text(option));
       if (option.negatable) flag->description(help_text(option) + fmt::format(" (default: {})", option.default_text() == "true" ? "on" : "off"));
+    } else if (option.repeatable) {
+      flag = cmd.add_option_function<std::vector<std::string>>(
+                    option.flag(),
+                    [&o, entry](const std::vector<std::string>& texts) {
+                      for (const std::string& text : texts) apply(o, *entry, text);
+                    },
+                    help_text(option))
+                 ->type_name(type_name(option))
+                 ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
+                 ->allow_extra_args(false);
     } else {
       flag = cmd.add_option_function<std::string>(
                     option.flag(), [&o, entry](const std::string& text) { apply(o, *entry, text); },

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "lapflow/bake/layers.hpp"
 #include "lapflow/bake/options.hpp"
 #include "lapflow/core/errors.hpp"
 
@@ -36,11 +37,86 @@ std::string scalar_text(const toml::node& node, const std::string& file, const s
   throw InputError(file, "key '" + key + "': expected a string, number or boolean");
 }
 
+std::string line_of(const toml::node& node) { return "line " + std::to_string(node.source().begin.line); }
+
+/// A shipped exemplar's name (`pebbles`: no folder, no extension), which
+/// is not a path to take from the scene file's folder.
+bool shipped_name(const std::string& text) {
+  return text.find('/') == std::string::npos && text.find('.') == std::string::npos;
+}
+
+/// A layer's files relative to the scene file's folder.
+void rebase(ExemplarLayer& layer, const fs::path& base) {
+  for (std::string* path : {&layer.color, &layer.feature, &layer.displacement})
+    if (!path->empty() && fs::path(*path).is_relative() && !(path == &layer.color && shipped_name(*path)))
+      *path = (base / *path).string();
+}
+
+/// `layer = "NAME=COLOR,..."` (';' between several), or `[[layer]]` tables
+/// with name, color (or exemplar), feature, displacement and where: one
+/// --layer each, and a --where for a table's rule.
+void add_layers(const toml::node& node, const std::string& file, const fs::path& base,
+                std::vector<std::string>& out) {
+  auto from_text = [&](const toml::node& value) {
+    const std::optional<std::string> text = value.value<std::string>();
+    if (!text) throw InputError(file, line_of(value) + ": 'layer' expects NAME=COLOR[,FEATURE[,DISP]] or [[layer]] tables");
+    for (std::size_t at = 0; at < text->size();) {
+      const std::size_t end = std::min(text->find(';', at), text->size());
+      const std::string one = text->substr(at, end - at);
+      ExemplarLayer layer;
+      try {
+        layer = parse_layer(one);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(file, line_of(value) + ": layer " + quote_token(one) + " is not " + e.what());
+      }
+      rebase(layer, base);
+      out.push_back("--layer=" + layer_text(layer));
+      at = end + 1;
+    }
+  };
+  auto from_table = [&](const toml::table& t) {
+    ExemplarLayer layer;
+    std::string where;
+    for (const auto& [k, value] : t) {
+      const std::string key(k.str());
+      const std::optional<std::string> text = value.value<std::string>();
+      if (!text)
+        throw InputError(file, line_of(value) + ": [[layer]] key " + quote_token(key) + " expects a string");
+      if (key == "name") layer.name = *text;
+      else if (key == "color" || key == "exemplar") layer.color = *text;
+      else if (key == "feature") layer.feature = *text;
+      else if (key == "displacement") layer.displacement = *text;
+      else if (key == "where") where = *text;
+      else
+        throw InputError(file, line_of(value) + ": [[layer]] has no key " + quote_token(key) +
+                                   " (name, color, feature, displacement, where)");
+    }
+    if (!is_layer_name(layer.name))
+      throw InputError(file, line_of(t) + ": a [[layer]] needs a name of letters, digits, '_' and '-'");
+    if (layer.color.empty()) throw InputError(file, line_of(t) + ": [[layer]] '" + layer.name + "' has no color");
+    rebase(layer, base);
+    out.push_back("--layer=" + layer_text(layer));
+    if (!where.empty()) out.push_back("--where=" + layer.name + ":" + where);
+  };
+  if (const toml::array* arr = node.as_array()) {
+    for (const toml::node& v : *arr) {
+      if (const toml::table* t = v.as_table()) from_table(*t);
+      else from_text(v);
+    }
+  } else {
+    from_text(node);
+  }
+}
+
 void add_table(const toml::table& table, const std::string& file, const fs::path& base,
                std::vector<std::string>& out) {
   for (const auto& [k, node] : table) {
     std::string key(k.str());
     std::replace(key.begin(), key.end(), '_', '-');
+    if (key == "layer") {
+      add_layers(node, file, base, out);
+      continue;
+    }
     if (node.is_table()) continue;  // sections are handled by the caller
     // A key becomes `--key`: anything but an option name (an empty key, a
     // space, an '=') would reach the command line as something else.
@@ -57,7 +133,9 @@ void add_table(const toml::table& table, const std::string& file, const fs::path
         out.push_back(text == "true" ? "--" + key : "--" + key + "=false");
         return;
       }
-      if (is_path_option(key) && !text.empty() && fs::path(text).is_relative()) text = (base / text).string();
+      if (is_path_option(key) && !text.empty() && fs::path(text).is_relative() &&
+          !(key == "exemplar" && shipped_name(text)))
+        text = (base / text).string();
       out.push_back("--" + key + "=" + text);
     };
     if (const toml::array* arr = node.as_array()) {

@@ -250,6 +250,20 @@ void foam(double x, double y, Rgb& c, double& f, double& d) {
   c = mix(water, Rgb{0.92, 0.95, 0.95} * (0.85 + 0.15 * bubbles), cover);
 }
 
+// Ripples: calm water with soft caustic lines (the borders of a warped
+// Voronoi); feature high inside the cells, 0 on the bright lines, so a
+// distorted patch erodes along them. The calm partner of foam (docs/layers.md).
+void ripples(double x, double y, Rgb& c, double& f, double& d) {
+  const double wx = x + 0.035 * fbm(x, y, 4, 3, 61), wy = y + 0.035 * fbm(x, y, 4, 3, 62);
+  const Cell cell = voronoi(wx, wy, 9, 63, 0.9);
+  const double line = 1 - smoothstep(0.0, 0.09, cell.border);
+  const double swell = 0.5 + 0.5 * fbm(x, y, 2, 3, 64);
+  f = smoothstep(0.02, 0.3, cell.border);
+  d = std::clamp(0.35 + 0.4 * swell + 0.25 * line, 0.0, 1.0);
+  const Rgb deep{0.03, 0.16, 0.24}, shallow{0.07, 0.33, 0.40};
+  c = mix(deep, shallow, 0.35 + 0.5 * swell) + Rgb{0.32, 0.38, 0.36} * (line * line);
+}
+
 struct Exemplar {
   const char* name;
   void (*shade)(double, double, Rgb&, double&, double&);
@@ -261,6 +275,7 @@ constexpr Exemplar kExemplars[] = {
     {"squares", squares, "coloured squares on a dark background (the paper's Fig. 10); feature high inside squares"},
     {"scales", scales, "overlapping fish/dragon scales; feature = distance to the visible scale's rim"},
     {"foam", foam, "stochastic sea foam (fBm noise) over deep water; feature = foam density"},
+    {"ripples", ripples, "calm water with soft caustic lines; feature high inside the ripple cells, 0 on the lines"},
 };
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include "lapflow/atlas/atlas.hpp"
 #include "lapflow/bake/budget.hpp"
 #include "lapflow/bake/frame.hpp"
+#include "lapflow/bake/layers.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "lapflow/patches/patches.hpp"
@@ -37,6 +38,15 @@ struct BakeOptions {
   int velocity_band = 6;
   double velocity_voxel = 2.0;
   std::string exemplar_color, exemplar_feature, exemplar_displacement;
+  /// Exemplar layers (docs/layers.md), in the order their rules are tried;
+  /// empty: one layer, the exemplar_* files.
+  std::vector<ExemplarLayer> layers;
+  /// Each layer's rule by name (layer, rule text); the last layer has none.
+  std::vector<std::pair<std::string, std::string>> layer_rules;
+  /// Frames in a row a patch's centre must lie where the rules choose
+  /// another layer before the patch is retired, so that the new layer's
+  /// patches take the place (docs/layers.md, "Changing regions").
+  int layer_switch = 6;
   // Outputs
   std::string out_dir;
   std::string name = "lapflow";
@@ -134,7 +144,7 @@ void build_frame_atlases(Frame& frame, const BakeOptions& options);
 /// each patch won, retirement). `frame` must have its tracking atlas.
 /// `patches` leave as the frame's state. Fills the tracking's part of
 /// frame.stats and returns the tracking raster's counts.
-RasterStats track_frame(Frame& frame, const Frame* previous, PatchSet& patches, const RasterExemplar& exemplar,
+RasterStats track_frame(Frame& frame, const Frame* previous, PatchSet& patches, ExemplarLayers exemplars,
                         const BakeOptions& options);
 
 /// The output of one frame from the patches as they leave it, as `bake` and
@@ -144,7 +154,7 @@ RasterStats track_frame(Frame& frame, const Frame* previous, PatchSet& patches, 
 /// frame.textures and dilates the gutter. Fills the output's part of
 /// frame.stats: draw, holes, resolve, dilate and raster seconds, charts,
 /// utilization, chart, forced, closed and held texels, coverage.
-void render_frame(Frame& frame, const PatchSet& patches, const RasterExemplar& exemplar, const BakeOptions& options);
+void render_frame(Frame& frame, const PatchSet& patches, ExemplarLayers exemplars, const BakeOptions& options);
 
 /// Peak resident memory of this process so far, in MiB.
 double peak_rss_mb();

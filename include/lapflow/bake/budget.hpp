@@ -23,6 +23,13 @@ struct BakeInputSizes {
   /// sequence whose surface grows needs more per frame than the first.
   double growth = 1;
   ImageHeader color, feature, displacement;  ///< displacement.width = 0 when there is none
+  /// With exemplar layers (BakeOptions::layers), the above are the first
+  /// layer's and these every layer's, in order.
+  struct Layer {
+    std::string color_path, feature_path, displacement_path;
+    ImageHeader color, feature, displacement;
+  };
+  std::vector<Layer> layers;
 };
 
 /// Reads BakeInputSizes for resolved inputs (exemplar paths filled): the

@@ -35,6 +35,10 @@ struct FrameSource {
   /// for every sample).
   int velocity_band = 6;
   double velocity_voxel = 2.0;
+  /// PLY vertex properties read into Frame::attributes (what layer rules
+  /// read besides speed and curvature); a frame without one of them is an
+  /// InputError naming the file.
+  std::vector<std::string> attributes;
 };
 
 /// Statistics of one baked frame (one line of NAME.stats.jsonl).
@@ -48,6 +52,11 @@ struct FrameStats {
   /// triangle over delta-max) and hidden (under older patches: it kept
   /// nothing visible).
   std::size_t retired_eroded = 0, retired_hidden = 0, retired_merged = 0;
+  /// With exemplar layers (`layered`): retired because their centre lay
+  /// where the rules choose another layer (BakeOptions::layer_switch);
+  /// counted in patches_retired too.
+  std::size_t retired_layer = 0;
+  bool layered = false;
   /// Patches a fresh Poisson seeding of this frame would create (the
   /// population's yardstick).
   std::size_t fresh_seeding = 0;
@@ -94,6 +103,7 @@ struct FrameInput {
   std::string path;                     ///< the mesh file
   TriMesh mesh;                         ///< with per-vertex velocities when the file has them
   std::unique_ptr<VelocityGrid> grid;   ///< set with FrameSource::velocity_vdb_pattern
+  std::vector<std::vector<float>> attributes;  ///< FrameSource::attributes, per vertex
 };
 FrameInput read_frame_input(const FrameSource& source, int frame);
 
@@ -120,6 +130,8 @@ struct Frame {
   std::unique_ptr<VelocityGrid> velocity_grid;    ///< with a VDB pattern
   VelocityField velocity;                         ///< after FrameSource's rules (band, min-speed)
   std::string velocity_source;                    ///< "vertex", "vdb:NAME", "zero", ...
+  /// FrameSource::attributes, in that order: one value per vertex each.
+  std::vector<std::vector<float>> attributes;
   SurfaceAtlas atlas;                             ///< step 6 (build_surface_atlas): the output's
   SurfaceAtlas tracking_atlas;                    ///< the same at the tracking resolution
   FrameTextures textures;                         ///< the atlas images once resolved

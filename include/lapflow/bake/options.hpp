@@ -52,6 +52,9 @@ struct BakeOption {
   /// before the option existed); none: the default.
   std::optional<std::string> absent;
   bool negatable = false;        ///< Flag: also --no-NAME
+  /// Given more than once, each occurrence applies in turn (--layer,
+  /// --where): `set` adds to what is there instead of replacing it.
+  bool repeatable = false;
   bool on_command_line = true;   ///< false: set by the library or a preset, recorded in the manifest
   bool global = false;           ///< a flag every command has (--seed): declared with the global options
   std::vector<std::string> excludes;  ///< flags that cannot be given with this one

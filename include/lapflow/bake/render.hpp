@@ -19,6 +19,9 @@ struct RenderOptions {
   std::optional<FrameRange> frames;       ///< every frame of the manifest when empty
   int resolution = 0;                     ///< 0: the manifest's
   std::string exemplar_color, exemplar_feature, exemplar_displacement;  ///< empty: the manifest's
+  /// A tracking with exemplar layers: layers whose exemplar this render
+  /// swaps, by name (each feature map must be the tracked one).
+  std::vector<ExemplarLayer> layers;
   std::string out_dir;                    ///< empty: `dir`
   std::optional<bool> aov;                ///< the manifest's when empty
   std::optional<bool> usd;                ///< the manifest's when empty

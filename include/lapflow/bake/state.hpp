@@ -39,6 +39,10 @@ struct BakeStateHeader {
   /// The frame's mesh file as it was tracked (none in a state written
   /// before stamps were kept).
   std::optional<InputStamp> mesh;
+  /// The bake's exemplar layers. With more than one, the header says how
+  /// many and each patch also holds Patch::layer and Patch::layer_off; a
+  /// bake of one exemplar writes the same bytes as before layers existed.
+  int layers = 1;
 };
 struct BakeState {
   BakeStateHeader header;

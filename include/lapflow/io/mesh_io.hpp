@@ -45,11 +45,22 @@ struct MeshFileInfo {
 struct MeshFile {
   TriMesh mesh;
   MeshFileInfo declared;
+  /// Per-vertex values of the properties read_mesh_file was asked for by
+  /// name, in that order (one per vertex each).
+  std::vector<std::vector<float>> attributes;
 };
 /// read_mesh, also telling the declared property types. With `check_bounds`
 /// false a mesh beyond kMaxMeshCoordinate is returned instead of refused
-/// (lapflow inspect reports it); every other check stays.
-MeshFile read_mesh_file(const std::string& path, bool check_bounds = true);
+/// (lapflow inspect reports it); every other check stays. `attributes`
+/// names PLY vertex properties of any number type (a simulator's `foam`,
+/// `temperature`, ...) read into MeshFile::attributes as floats; a name the
+/// file lacks, a list property, a non-finite value or an OBJ file (which has
+/// no vertex properties) is an InputError naming the file and the property.
+MeshFile read_mesh_file(const std::string& path, bool check_bounds = true,
+                        const std::vector<std::string>& attributes = {});
+/// The names of the PLY vertex properties of the file at `path` other than
+/// positions and velocities, as its header declares them (empty for OBJ).
+std::vector<std::string> mesh_vertex_property_names(const std::string& path);
 
 /// read_mesh on bytes already in memory: `name` gives the format (its
 /// extension, else PLY when the bytes start with the PLY magic) and names the

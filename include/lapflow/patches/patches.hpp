@@ -45,6 +45,14 @@ struct Patch {
   /// the rasterizer holds what it closed there too (RasterOptions::hold;
   /// docs/temporal.md). False for a patch born this frame.
   bool at_rest = false;
+  /// Its exemplar layer (BakeOptions::layers), chosen where it was born and
+  /// kept for life: the texture follows the flow and erosion reads this
+  /// layer's feature map. 0 in a bake of one exemplar.
+  uint16_t layer = 0;
+  /// Frames in a row its centre has lain where the layer rules choose
+  /// another layer; the bake retires it when this reaches
+  /// BakeOptions::layer_switch (docs/layers.md).
+  uint16_t layer_off = 0;
 
   bool alive() const { return !triangles.empty(); }
   std::size_t vertex_count() const { return positions.size(); }

@@ -15,6 +15,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "lapflow/atlas/atlas.hpp"
@@ -134,6 +135,12 @@ struct RasterExemplar {
   ErosionMap erosion;
 };
 
+/// The exemplars of a bake's layers, indexed by Patch::layer: one in a bake
+/// of one exemplar.
+using ExemplarLayers = std::span<const RasterExemplar>;
+/// The most exemplar layers a bake may have (Patch::layer's range).
+inline constexpr std::size_t kMaxLayers = 16;
+
 /// Builds the mip pyramid and the erosion map. `epsilon` is RasterOptions::epsilon.
 RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon);
 ExemplarMips build_exemplar_mips(const Exemplar& exemplar);
@@ -183,7 +190,8 @@ struct FrameTextures {
   /// instead (the same values rounded as to_half_image rounds them; the
   /// float images stay empty).
   HalfImage color_half, displacement_half;
-  Image aov;           ///< patch_id (stable Patch::id as float, -1 where none), u, v, w; empty unless RasterOptions::aov
+  Image aov;           ///< patch_id (stable Patch::id as float, -1 where none), u, v, w, and with more than one
+                       ///< exemplar layer the layer (-1 where none); empty unless RasterOptions::aov
                        ///< (Blend: the patch of largest w at the texel, ties to the oldest)
   RasterStats stats;
 };
@@ -219,6 +227,11 @@ struct RasterBuffers {
 /// triangle under a patch vertex whose surface_triangle is unknown (may be
 /// empty).
 RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                           const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate = {});
+/// The same with one exemplar per layer: each patch is drawn, eroded and
+/// sampled with exemplars[Patch::layer] (the layer of every patch must be
+/// below exemplars.size()); the AOV then has a fifth channel, the layer.
+RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplars,
                            const RasterOptions& options, const WeightOptions& weights, TriangleLocator locate = {});
 
 /// Step 7: draws every patch triangle into the atlas (its vertices' fluid
@@ -262,18 +275,29 @@ void dilate_gutter(RasterBuffers& buffers, FrameTextures& textures);
 /// retire_patches. `patches` leave as they carry over to the next frame.
 /// Draws no image whatever `options` say. Returns the counts and each step's
 /// wall seconds (seconds_raster is the draw).
-RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplars,
                        const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
                        int frame, const PatchMaker& make_patch, PatchSet& patches);
+inline RasterStats track_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                              const RasterOptions& options, const WeightOptions& weights,
+                              const TriangleLocator& locate, int frame, const PatchMaker& make_patch,
+                              PatchSet& patches) {
+  return track_pass(mesh, atlas, ExemplarLayers{&exemplar, 1}, options, weights, locate, frame, make_patch, patches);
+}
 
 /// The output pass of a frame, as `bake` and `lapflow render` draw the
 /// patches as they leave the tracking pass (docs/farm.md): draw_patches,
 /// close_holes (no birth), resolve_texels and dilate_gutter. Marks no held
 /// cell (RasterOptions::mark_held is off). FrameTextures::stats holds the
 /// counts and each step's wall seconds.
-FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, ExemplarLayers exemplars,
                           const RasterOptions& options, const WeightOptions& weights, const TriangleLocator& locate,
                           const PatchSet& patches);
+inline FrameTextures output_pass(const TriMesh& mesh, const SurfaceAtlas& atlas, const RasterExemplar& exemplar,
+                                 const RasterOptions& options, const WeightOptions& weights,
+                                 const TriangleLocator& locate, const PatchSet& patches) {
+  return output_pass(mesh, atlas, ExemplarLayers{&exemplar, 1}, options, weights, locate, patches);
+}
 
 /// Hole-filling patches by create_patch on `surface` (the fluid triangle's
 /// normal at the texel). `adjacency` (of surface.mesh()) must outlive it.

@@ -28,6 +28,16 @@ double triangle_area(const TriMesh& m, int t);
 double surface_area(const TriMesh& m);
 /// Area-weighted vertex normals (unit length; zero for isolated vertices).
 std::vector<Vec3> vertex_normals(const TriMesh& m);
+/// Mean curvature H = (k1 + k2) / 2 at each vertex, in 1/metres: positive
+/// where the surface is convex seen from outside (a sphere of radius R gives
+/// 1/R with counter-clockwise triangles seen from outside). From the
+/// cotangent Laplacian over mixed Voronoi areas (Meyer, Desbrun, Schroeder
+/// and Barr 2003, "Discrete Differential-Geometry Operators for Triangulated
+/// 2-Manifolds"): K = -2 H n is the discrete Laplacian of the position and n
+/// the area-weighted vertex normal, so H = -K . n / 2. 0 at boundary vertices (on an edge of one
+/// triangle), isolated vertices and where the area is zero. Deterministic and
+/// the same at any thread count.
+std::vector<float> vertex_mean_curvature(const TriMesh& mesh);
 /// Bounding box of the vertices referenced by triangles (all vertices if none).
 Box3 bounding_box(const TriMesh& m);
 /// Connected components over shared vertices: per-triangle component id, and
