@@ -45,6 +45,7 @@ void inspect_frame(const InspectOptions& o, const FramePattern& mesh_pattern, co
   const TriMesh& m = file.mesh;
   r.report = analyze_mesh(m);
   r.warnings = units_problems(m, file.declared);
+  r.attributes = file.declared.attributes;
   bool sampleable = true;  // OpenVDB's index space overflows beyond kMaxMeshCoordinate
   try {
     check_mesh_bounds(m, r.file);
@@ -125,6 +126,13 @@ InspectSummary summarize(const std::vector<FrameInspection>& results) {
       continue;
     }
     const MeshReport& m = r.report;
+    // The properties every readable frame has.
+    if (s.readable == 0)
+      s.attributes = r.attributes;
+    else
+      std::erase_if(s.attributes, [&](const std::string& a) {
+        return std::find(r.attributes.begin(), r.attributes.end(), a) == r.attributes.end();
+      });
     ++s.readable;
     if (m.triangles == 0) s.empty.push_back(r.frame);
     if (m.triangles < s.tri_min) s.tri_min = m.triangles, s.tri_min_frame = r.frame;
@@ -216,7 +224,8 @@ nlohmann::json inspection_json_value(const InspectOptions& o, const std::vector<
                             {"frames_without_velocity", s.frames_without_velocity},
                             {"frames_with_warnings", s.frames_with_warnings},
                             {"warnings", all_warnings},
-                            {"min_speed", o.min_speed}};
+                            {"min_speed", o.min_speed},
+                            {"vertex_attributes", s.attributes}};
   if (s.mean_difference >= 0)
     summary["grid_relative_difference"] = {{"mean", s.mean_difference}, {"worst", s.worst_difference},
                                            {"worst_frame", s.worst_difference_frame}};

@@ -405,6 +405,8 @@ TriMesh read_ply(const std::string& path, const std::string& data, MeshFileInfo*
               const PlyProperty& p = e.props[k];
               (want < 3 ? declared->positions : declared->velocities).push_back({p.name, p.type_word, is_integer(p.type)});
             }
+        for (std::size_t k = 0; k < slot.size(); ++k)
+          if ((slot[k] < 0 || slot[k] >= 6) && !e.props[k].is_list) declared->attributes.push_back(e.props[k].name);
       }
       // Never trust the count for allocation beyond what the file can hold.
       const std::size_t cap = std::min<uint64_t>(e.count, data.size());
@@ -689,23 +691,6 @@ MeshFile read_mesh_file(const std::string& path, bool check_bounds, const std::v
 }
 
 TriMesh read_mesh(const std::string& path) { return read_mesh_file(path).mesh; }
-
-std::vector<std::string> mesh_vertex_property_names(const std::string& path) {
-  const std::string data = load_file(path);
-  const bool ply_magic = data.size() >= 4 && data.compare(0, 3, "ply") == 0 && (data[3] == '\n' || data[3] == '\r');
-  if (!ply_magic) return {};
-  const PlyHeader h = parse_ply_header(path, data);
-  std::vector<std::string> names;
-  for (const PlyElement& e : h.elements) {
-    if (e.name != "vertex") continue;
-    bool has_velocity = false;
-    const std::vector<int> slot = vertex_slots(path, e, has_velocity, {});
-    for (std::size_t k = 0; k < e.props.size(); ++k)
-      if (slot[k] < 0 && !e.props[k].is_list) names.push_back(e.props[k].name);
-    break;
-  }
-  return names;
-}
 
 std::vector<std::string> units_problems(const TriMesh& mesh, const MeshFileInfo& declared, bool check_velocity) {
   std::vector<std::string> problems;

@@ -126,3 +126,13 @@ TEST(InspectCommand, DamBreakWithVdbVelocities) {
             2);
   EXPECT_NE(err.find("dam_break.0001.vdb (frame 1): no vector grid named 'vel'"), std::string::npos) << err;
 }
+
+TEST(InspectCommand, NamesTheVertexPropertiesALayerRuleMayRead) {
+  TempDir tmp("inspect_attributes");
+  test::write_heat_plane(tmp.str(), 2, [](double x, int) { return x; });
+  std::string out, err;
+  ASSERT_EQ(test::run_command(inspect("'" + (tmp / "m.%04d.ply") + "' --json --quiet"), &out, &err, tmp), 0) << err;
+  EXPECT_EQ(nlohmann::json::parse(out)["summary"]["vertex_attributes"], nlohmann::json::array({"heat"}));
+  ASSERT_EQ(test::run_command(inspect("'" + (tmp / "m.%04d.ply") + "'"), &out, &err, tmp), 0) << err;
+  EXPECT_NE(out.find("rule attributes   speed, curvature, heat"), std::string::npos) << out;
+}

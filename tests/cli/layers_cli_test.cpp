@@ -8,7 +8,10 @@
 #include <string>
 
 #include "io_test_helpers.hpp"
+#include "lapflow/bake/layers.hpp"
 #include "lapflow/bake/manifest.hpp"
+#include "lapflow/bake/options.hpp"
+#include "scene_file.hpp"
 #include "lapflow/io/image.hpp"
 
 using namespace lapflow;
@@ -83,6 +86,26 @@ TEST_F(LayersCli, MistakesAreExitTwoNamingWhatIsWrong) {
   EXPECT_NE(err.find("--exemplar and --layer"), std::string::npos) << err;
   // Nothing was written for any of them.
   EXPECT_FALSE(fs::exists(dir_ / "out/m.0001.obj"));
+}
+
+TEST(LayersScenes, TheShippedLayeredSceneFilesHoldValidLayersAndRules) {
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(LAPFLOW_SOURCE_DIR "/exemplars/scenes")) {
+    if (e.path().extension() != ".toml") continue;
+    SCOPED_TRACE(e.path().string());
+    ++files;
+    BakeOptions o = default_bake_options();
+    for (const std::string& arg : cli::scene_file_arguments(e.path().string())) {
+      const std::size_t eq = arg.find('=');  // none: a flag (`aov = true` is --aov)
+      const BakeOption* option = find_bake_option(arg.substr(2, eq == std::string::npos ? std::string::npos : eq - 2));
+      ASSERT_NE(option, nullptr) << arg;
+      set_bake_option(o, *option, eq == std::string::npos ? "true" : arg.substr(eq + 1));
+    }
+    const LayerRules rules = layer_rules(o);
+    EXPECT_GE(rules.size(), 2u);
+    EXPECT_EQ(rules.names.back(), "calm");
+  }
+  EXPECT_GE(files, 2);
 }
 
 }  // namespace

@@ -257,3 +257,35 @@ TEST(FramePattern, ParseFrameRange) {
   EXPECT_THROW(parse_frame_range(""), UsageError);
   EXPECT_THROW(parse_frame_range("1-"), UsageError);
 }
+
+TEST(ReadMesh, VertexPropertiesByNameForLayerRules) {
+  TempDir tmp("mesh_io_attributes");
+  test::write_bytes(tmp / "a.ply", ascii_ply());
+  // Any number type, read as float, in the order asked; the file's other
+  // properties are declared for `lapflow inspect`.
+  const MeshFile f = read_mesh_file(tmp / "a.ply", true, {"nx", "red"});
+  ASSERT_EQ(f.attributes.size(), 2u);
+  EXPECT_EQ(f.attributes[0], (std::vector<float>{1, 1, 1, 1}));
+  EXPECT_EQ(f.attributes[1], (std::vector<float>{255, 10, 0, 0}));
+  EXPECT_EQ(f.declared.attributes, (std::vector<std::string>{"red", "nx"}));
+  EXPECT_EQ(read_mesh_file(tmp / "a.ply").mesh.triangles, f.mesh.triangles) << "the same mesh";
+  // A name the file lacks, a list, a velocity component: the file and the property.
+  EXPECT_EQ(test::input_error_of([&] { read_mesh_file(tmp / "a.ply", true, {"foam"}); }),
+            tmp / "a.ply" + ": PLY vertex element has no property 'foam' (it has: red x y weights z velocity_x "
+                             "velocity_y velocity_z nx)");
+  EXPECT_NE(test::input_error_of([&] { read_mesh_file(tmp / "a.ply", true, {"weights"}); }).find("'weights' is a list"),
+            std::string::npos);
+  EXPECT_NE(test::input_error_of([&] { read_mesh_file(tmp / "a.ply", true, {"velocity_x"}); })
+                .find("is a position or velocity component"),
+            std::string::npos);
+  // A NaN value names the vertex.
+  std::string nan = ascii_ply();
+  nan.replace(nan.find("0 1 1 1 7 0 3 -1.5 0 1"), 22, "0 1 1 1 7 0 3 -1.5 0 nan");
+  test::write_bytes(tmp / "nan.ply", nan);
+  EXPECT_NE(test::input_error_of([&] { read_mesh_file(tmp / "nan.ply", true, {"nx"}); }).find("vertex 2: property 'nx' is NaN"),
+            std::string::npos);
+  // An OBJ has no vertex properties.
+  test::write_bytes(tmp / "q.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_NE(test::input_error_of([&] { read_mesh_file(tmp / "q.obj", true, {"foam"}); }).find("needs PLY frames"),
+            std::string::npos);
+}

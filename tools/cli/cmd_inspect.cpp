@@ -2,6 +2,8 @@
 // every frame (inspect_sequence, addons/inspect.hpp); this prints its
 // topology problems and the velocity each frame would be advected with, then
 // a one-screen summary or JSON.
+#include <fmt/ranges.h>
+
 #include <algorithm>
 #include <exception>
 #include <optional>
@@ -89,6 +91,8 @@ void print_summary(const InspectCommandOptions& o, const std::vector<FrameInspec
   if (!s.frames_without_velocity.empty())
     fmt::print("  NO VELOCITY       frames {}: a bake needs --allow-zero-velocity or --velocity-vdb\n",
                frame_list(s.frames_without_velocity));
+  fmt::print("  rule attributes   speed, curvature{}{} (docs/layers.md)\n", s.attributes.empty() ? "" : ", ",
+             fmt::format("{}", fmt::join(s.attributes, ", ")));
   if (s.mean_difference >= 0)
     fmt::print("  grid vs vertex    {:.1f}% mean relative difference (worst frame {}: {:.1f}%)\n",
                100 * s.mean_difference, s.worst_difference_frame, 100 * s.worst_difference);

@@ -37,6 +37,7 @@ struct FrameInspection {
   SpeedStats vertex_speed;  ///< from the PLY's vertex properties
   SpeedStats grid_speed;    ///< from the VDB sampled at the vertices
   std::string grid_name;
+  std::vector<std::string> attributes;  ///< the PLY's other vertex properties (MeshFileInfo::attributes)
   double grid_difference = -1;  ///< sum |v_grid - v_vertex| / sum |v_vertex|; -1 = not measured
   /// Sizes, speeds and property types no liquid has (units_problems): a
   /// bake refuses the frame unless --units-ok.
@@ -64,6 +65,8 @@ struct InspectSummary {
   double tri_mean = 0;
   std::size_t non_manifold_edges = 0, non_manifold_vertices = 0, degenerate = 0, boundary = 0, isolated = 0;
   std::vector<int> frames_with_non_manifold, frames_with_boundary, frames_without_velocity, frames_with_warnings;
+  /// Vertex properties every readable frame has (what a layer rule may read besides speed and curvature).
+  std::vector<std::string> attributes;
   Box3 bounds;
   double peak_speed = 0;
   int peak_frame = 0;

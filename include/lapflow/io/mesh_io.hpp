@@ -39,6 +39,9 @@ struct MeshFileInfo {
   };
   std::vector<Property> positions;   ///< x, y, z
   std::vector<Property> velocities;  ///< empty when the file has no velocity
+  /// The vertex element's other number properties (a simulator's `foam`,
+  /// `temperature`, ...): what a layer rule may read (docs/layers.md).
+  std::vector<std::string> attributes;
 };
 
 /// A mesh as read from its file, with how the file declared its data.
@@ -58,9 +61,7 @@ struct MeshFile {
 /// no vertex properties) is an InputError naming the file and the property.
 MeshFile read_mesh_file(const std::string& path, bool check_bounds = true,
                         const std::vector<std::string>& attributes = {});
-/// The names of the PLY vertex properties of the file at `path` other than
-/// positions and velocities, as its header declares them (empty for OBJ).
-std::vector<std::string> mesh_vertex_property_names(const std::string& path);
+
 
 /// read_mesh on bytes already in memory: `name` gives the format (its
 /// extension, else PLY when the bytes start with the PLY magic) and names the
