@@ -17,6 +17,7 @@
 #include "lapflow/bake/render.hpp"
 #include "lapflow/bake/state.hpp"
 #include "lapflow/core/errors.hpp"
+#include "lapflow/core/parallel.hpp"
 #include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 #include "test_helpers.hpp"
@@ -192,6 +193,23 @@ TEST(Layers, TheStateKeepsEachPatchsLayerAndARenderDrawsIt) {
   } catch (const UsageError& e) {
     EXPECT_NE(std::string(e.what()).find("no layer 'spray' (its layers: hot, calm)"), std::string::npos) << e.what();
   }
+}
+
+TEST(Layers, ALayeredBakeIsTheSameAtAnyThreadCount) {
+  TempDir dir("layers_threads");
+  fs::create_directories(dir / "in");
+  test::write_heat_plane(dir / "in", 3, [](double x, int f) { return x + 0.1 * f; });
+  for (const int threads : {1, 2}) {
+    BakeOptions o = heat_bake(dir / "in", dir / fmt::format("t{}", threads));
+    o.layer_switch = 1;  // retire on the first frame of another rule: the switch runs
+    resolve_bake_options(o);
+    set_thread_count(threads);
+    bake(o);
+  }
+  set_thread_count(0);
+  for (const std::string file : {"t.color.0003.exr", "t.aov.0003.exr", "t.0003.obj"})
+    EXPECT_TRUE(test::read_bytes(dir / ("t1/" + file)) == test::read_bytes(dir / ("t2/" + file))) << file;
+  EXPECT_EQ(bake_state_file_patches_crc(dir / "t1/t.state.0003.bin"), bake_state_file_patches_crc(dir / "t2/t.state.0003.bin"));
 }
 
 TEST(Layers, RulesAreCheckedBeforeTheBake) {
