@@ -134,23 +134,30 @@ std::vector<std::size_t> strided(std::size_t n, std::size_t count) {
   return out;
 }
 
+/// True when chart texel i is covered and, for `layer` >= 0, shows that
+/// exemplar layer (FrameData::layer).
+bool shows(const FrameData& f, std::size_t i, int layer) {
+  return f.covered[i] && (layer < 0 || f.layer[i] == layer);
+}
+
 /// Sliced W1 between 5x5 luminance windows of the surface (every texel of
-/// the window a covered texel of the centre's chart) and of the exemplar at
-/// the atlas texel scale. Returns {distance, surface windows used}.
-std::pair<double, std::size_t> sliced_wasserstein(const FrameData& f, const ExemplarStats& ex,
-                                                  const EvalOptions& o) {
+/// the window a covered texel of the centre's chart, showing `layer` when it
+/// is >= 0) and of the exemplar at the atlas texel scale. Returns {distance,
+/// surface windows used}.
+std::pair<double, std::size_t> sliced_wasserstein(const FrameData& f, const ExemplarStats& ex, const EvalOptions& o,
+                                                  int layer) {
   constexpr int h = kWindow / 2;
   const std::size_t count = f.texels.size();
   std::vector<uint8_t> ok(count, 0);
   parallel_for(count, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
-      if (!f.covered[i]) continue;
+      if (!shows(f, i, layer)) continue;
       const int x = f.x_of(i), y = f.y_of(i), chart = f.chart_of_slot(i);
       bool good = true;
       for (int dy = -h; dy <= h && good; ++dy)
         for (int dx = -h; dx <= h && good; ++dx) {
           const int32_t j = f.slot_at(x + dx, y + dy);
-          good = j >= 0 && f.covered[j] && f.chart_of_slot(std::size_t(j)) == chart;
+          good = j >= 0 && shows(f, std::size_t(j), layer) && f.chart_of_slot(std::size_t(j)) == chart;
         }
       ok[i] = good;
     }
@@ -199,16 +206,18 @@ std::pair<double, std::size_t> sliced_wasserstein(const FrameData& f, const Exem
   return {mean, centres.size()};
 }
 
-void frame_metrics(const FrameData& f, ExemplarAtScale& exemplar, double radius, const EvalOptions& o,
-                   FrameMetrics& m) {
+/// Contrast and fidelity of the covered texels that show `layer` (every
+/// covered texel when it is -1) against `exemplar`: the fields of
+/// LayerMetrics up to surface_windows (`texels`: the texels compared).
+LayerMetrics compare_with_exemplar(const FrameData& f, ExemplarAtScale& exemplar, double radius, const EvalOptions& o,
+                                   int layer) {
+  LayerMetrics c;
   const std::size_t count = f.texels.size();
-  m.chart_texels = count;
-  m.texel_world_size = f.texel_world;
-  m.exemplar_scale = exemplar.original().width * f.texel_world / (2 * radius);
-  const ExemplarStats& ex = exemplar.at(m.exemplar_scale);
-  m.exemplar_luminance_std = ex.luminance_std;
+  c.exemplar_scale = exemplar.original().width * f.texel_world / (2 * radius);
+  const ExemplarStats& ex = exemplar.at(c.exemplar_scale);
+  c.exemplar_luminance_std = ex.luminance_std;
 
-  // Coverage, area-weighted luminance moments and colour histograms.
+  // Area-weighted luminance moments and colour histograms.
   struct Part {
     std::size_t covered = 0;
     double w = 0, wl = 0;
@@ -219,7 +228,7 @@ void frame_metrics(const FrameData& f, ExemplarAtScale& exemplar, double radius,
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
     for (auto& h : p.hist) h.assign(kBins, 0);
     for (std::size_t i = b; i < e; ++i) {
-      if (!f.covered[i]) continue;
+      if (!shows(f, i, layer)) continue;
       const double w = weight_of(i);
       ++p.covered;
       p.w += w;
@@ -236,21 +245,102 @@ void frame_metrics(const FrameData& f, ExemplarAtScale& exemplar, double radius,
     for (int c = 0; c < 3; ++c)
       for (int k = 0; k < kBins; ++k) total.hist[c][k] += p.hist[c][k];
   }
-  m.covered_texels = total.covered;
-  m.coverage = count ? double(total.covered) / double(count) : kNoValue;
+  c.texels = total.covered;
   if (total.w > 0) {
     const double mean = total.wl / total.w;
     const auto var_parts = chunked<double>(count, [&](std::size_t b, std::size_t e, double& s) {
       for (std::size_t i = b; i < e; ++i)
-        if (f.covered[i]) s += weight_of(i) * (lum_of(i) - mean) * (lum_of(i) - mean);
+        if (shows(f, i, layer)) s += weight_of(i) * (lum_of(i) - mean) * (lum_of(i) - mean);
     });
-    m.luminance_std = std::sqrt(std::accumulate(var_parts.begin(), var_parts.end(), 0.0) / total.w);
-    m.contrast = ex.luminance_std > 0 ? m.luminance_std / ex.luminance_std : kNoValue;
+    c.luminance_std = std::sqrt(std::accumulate(var_parts.begin(), var_parts.end(), 0.0) / total.w);
+    c.contrast = ex.luminance_std > 0 ? c.luminance_std / ex.luminance_std : kNoValue;
     double sum = 0;
-    for (int c = 0; c < 3; ++c) sum += m.histogram_w1[c] = histogram_w1(total.hist[c], ex.histogram[c]);
-    m.histogram_distance = sum / 3;
+    for (int k = 0; k < 3; ++k) sum += c.histogram_w1[k] = histogram_w1(total.hist[k], ex.histogram[k]);
+    c.histogram_distance = sum / 3;
   }
-  std::tie(m.sliced_wasserstein, m.surface_windows) = sliced_wasserstein(f, ex, o);
+  std::tie(c.sliced_wasserstein, c.surface_windows) = sliced_wasserstein(f, ex, o, layer);
+  return c;
+}
+
+/// The mean of `get` over the layers with a value, weighted by their texels.
+template <typename Get>
+double texel_weighted(const std::vector<LayerMetrics>& layers, Get get) {
+  double sum = 0, weight = 0;
+  for (const LayerMetrics& l : layers)
+    if (const double v = get(l); std::isfinite(v) && l.texels > 0) sum += double(l.texels) * v, weight += double(l.texels);
+  return weight > 0 ? sum / weight : kNoValue;
+}
+
+/// A bake with exemplar layers: each layer's texels compared with its own
+/// exemplar, the frame's figures their texel-weighted means, each layer's
+/// share, and the agreement of the shown layer with the rules.
+void layered_frame_metrics(const FrameData& f, std::vector<ExemplarAtScale>& exemplars, double radius,
+                           const EvalOptions& o, FrameMetrics& m) {
+  const std::size_t count = f.texels.size();
+  struct Part {
+    std::size_t covered = 0, with_layer = 0, agree = 0, interior = 0, interior_agree = 0;
+  };
+  const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
+    for (std::size_t i = b; i < e; ++i) {
+      if (!f.covered[i]) continue;
+      ++p.covered;
+      if (f.layer[i] < 0) continue;
+      const bool agree = f.layer[i] == f.rule_layer[i];
+      ++p.with_layer;
+      p.agree += agree;
+      if (f.rule_interior[i]) ++p.interior, p.interior_agree += agree;
+    }
+  });
+  Part t;
+  for (const Part& p : parts) {
+    t.covered += p.covered, t.with_layer += p.with_layer, t.agree += p.agree;
+    t.interior += p.interior, t.interior_agree += p.interior_agree;
+  }
+  m.covered_texels = t.covered;
+  m.layer_agreement_texels = t.with_layer;
+  m.layer_agreement = t.with_layer ? double(t.agree) / double(t.with_layer) : kNoValue;
+  m.layer_agreement_interior_texels = t.interior;
+  m.layer_agreement_interior = t.interior ? double(t.interior_agree) / double(t.interior) : kNoValue;
+
+  m.layers.clear();
+  for (std::size_t l = 0; l < exemplars.size(); ++l) {
+    m.layers.push_back(compare_with_exemplar(f, exemplars[l], radius, o, int(l)));
+    m.layers.back().share = t.with_layer ? double(m.layers.back().texels) / double(t.with_layer) : kNoValue;
+  }
+  const auto& L = m.layers;
+  m.exemplar_scale = texel_weighted(L, [](const LayerMetrics& l) { return l.exemplar_scale; });
+  m.luminance_std = texel_weighted(L, [](const LayerMetrics& l) { return l.luminance_std; });
+  m.exemplar_luminance_std = texel_weighted(L, [](const LayerMetrics& l) { return l.exemplar_luminance_std; });
+  m.contrast = texel_weighted(L, [](const LayerMetrics& l) { return l.contrast; });
+  for (int c = 0; c < 3; ++c) m.histogram_w1[c] = texel_weighted(L, [c](const LayerMetrics& l) { return l.histogram_w1[c]; });
+  m.histogram_distance = texel_weighted(L, [](const LayerMetrics& l) { return l.histogram_distance; });
+  m.sliced_wasserstein = texel_weighted(L, [](const LayerMetrics& l) { return l.sliced_wasserstein; });
+  m.surface_windows = 0;
+  for (const LayerMetrics& l : L) m.surface_windows += l.surface_windows;
+}
+
+/// The single-frame metrics; `exemplars` holds one exemplar, or one per
+/// layer of a bake with exemplar layers (FrameData::layer set).
+void frame_metrics(const FrameData& f, std::vector<ExemplarAtScale>& exemplars, double radius, const EvalOptions& o,
+                   FrameMetrics& m) {
+  const std::size_t count = f.texels.size();
+  m.chart_texels = count;
+  m.texel_world_size = f.texel_world;
+  if (f.layer.empty()) {
+    const LayerMetrics c = compare_with_exemplar(f, exemplars.front(), radius, o, -1);
+    m.covered_texels = c.texels;
+    m.exemplar_scale = c.exemplar_scale;
+    m.exemplar_luminance_std = c.exemplar_luminance_std;
+    m.luminance_std = c.luminance_std;
+    m.contrast = c.contrast;
+    m.histogram_w1 = c.histogram_w1;
+    m.histogram_distance = c.histogram_distance;
+    m.sliced_wasserstein = c.sliced_wasserstein;
+    m.surface_windows = c.surface_windows;
+  } else {
+    layered_frame_metrics(f, exemplars, radius, o, m);
+  }
+  m.coverage = count ? double(m.covered_texels) / double(count) : kNoValue;
 
   // Distortion over visible (covered, patch-named) texels.
   std::vector<float> delta(count, NAN);
@@ -532,7 +622,11 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   struct Part {
     std::size_t compared = 0, rest = 0, drifted = 0;
     double w = 0, w_popped = 0, w_popped_born = 0;
+    // With exemplar layers, by the texel's layer on this frame.
+    std::vector<std::size_t> layer_compared;
+    std::vector<double> layer_w, layer_w_popped;
   };
+  const std::size_t layers = cur.layer.empty() ? 0 : m.layers.size();
   // Ids grow with birth: a patch newer than every patch of the previous
   // frame's atlas was born on this frame.
   int32_t newest_prev = -1;
@@ -541,6 +635,9 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   const double reach = 2 * s.radius;
   const double drift_tolerance = 0.5 * uv_texel;
   const auto parts = chunked<Part>(count, [&](std::size_t b, std::size_t e, Part& p) {
+    p.layer_compared.assign(layers, 0);
+    p.layer_w.assign(layers, 0);
+    p.layer_w_popped.assign(layers, 0);
     for (std::size_t i = b; i < e; ++i) {
       if (cur.patch[i] < 0) continue;
       const Vec3 v = velocity_at(cur, i, cur.position[i]);
@@ -556,6 +653,12 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
       if (popped) {
         p.w_popped += w;
         if (born) p.w_popped_born += w;
+      }
+      if (layers && cur.layer[i] >= 0) {
+        const std::size_t l = std::size_t(cur.layer[i]);
+        ++p.layer_compared[l];
+        p.layer_w[l] += w;
+        if (popped) p.layer_w_popped[l] += w;
       }
       if (kinds) (*kinds)[i] = !popped ? PopKind::Kept : born ? PopKind::PoppedToNewborn : PopKind::PoppedToExisting;
       if (norm(v) <= s.rest_speed) {
@@ -584,6 +687,13 @@ void pair_metrics(const FrameData& prev, const FrameData& cur, const PairSetting
   m.popping_births = t.w_popped > 0 ? t.w_popped_born / t.w_popped : kNoValue;
   m.rest_texels = t.rest;
   m.drift_texel = t.rest ? double(t.drifted) / double(t.rest) : kNoValue;
+  for (std::size_t l = 0; l < layers; ++l) {
+    std::size_t compared = 0;
+    double w = 0, w_popped = 0;
+    for (const Part& p : parts) compared += p.layer_compared[l], w += p.layer_w[l], w_popped += p.layer_w_popped[l];
+    m.layers[l].popping_texels = compared;
+    m.layers[l].popping = w > 0 ? w_popped / w : kNoValue;
+  }
 
   rest_point_drift(prev, cur, s, m);
   rest_point_change(prev, cur, s, m);
@@ -685,21 +795,46 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
                                             o.frames->last, folder)
                               : "the bake in " + folder + " lists no frames");
 
+  // The layers' rules, to read the layer they choose at each texel.
+  LayerRules rules;
+  try {
+    rules = layer_rules(m.options);
+  } catch (const UsageError& e) {
+    throw InputError(bake_manifest_path(folder, m.name), e.what());
+  }
+  const bool layered = rules.size() > 1;
+  if (layered && !o.exemplar.empty())
+    throw UsageError(fmt::format("--exemplar: the bake in {} has exemplar layers ({}); eval compares each layer with "
+                                 "its own exemplar", folder, fmt::join(rules.names, ", ")));
+
   EvalReport report;
   report.dir = folder;
   report.name = m.name;
   report.mode = raster_mode_name(m.options.raster.mode);
+  // One --layer alone is a bake of that exemplar.
+  const std::string bake_exemplar = m.options.layers.size() == 1 ? m.options.layers.front().color : m.options.exemplar_color;
   report.exemplar = !o.exemplar.empty()                              ? o.exemplar
                     : rendered && !rendered->exemplar_color.empty() ? rendered->exemplar_color
-                                                                    : m.options.exemplar_color;
+                                                                    : bake_exemplar;
   report.resolution = m.options.atlas.resolution;
   if (const auto res = recorded("resolution")) report.resolution = std::atoi(res->c_str());
   report.radius = m.options.patch.radius;
   report.fps = m.options.fps;
   report.rest_speed = o.min_speed ? *o.min_speed : m.options.min_speed;
   if (report.rest_speed < 0) throw UsageError("--min-speed must not be negative");
-  ExemplarAtScale exemplar(read_image(report.exemplar));
-  report.exemplar_luminance_std = exemplar_stats(exemplar.original()).luminance_std;
+  std::vector<ExemplarAtScale> exemplars;
+  if (layered) {
+    report.exemplar.clear();
+    for (const ExemplarLayer& layer : m.options.layers) {
+      exemplars.emplace_back(read_image(layer.color));
+      report.layers.push_back({layer.name, layer.color, exemplar_stats(exemplars.back().original()).luminance_std});
+      report.exemplar += (report.exemplar.empty() ? "" : ",") + layer.name + "=" + layer.color;
+    }
+    report.exemplar_luminance_std = kNoValue;
+  } else {
+    exemplars.emplace_back(read_image(report.exemplar));
+    report.exemplar_luminance_std = exemplar_stats(exemplars.front().original()).luminance_std;
+  }
   const auto population = read_population(m);
   if (!o.maps_dir.empty()) {
     std::error_code ec;
@@ -711,10 +846,10 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   std::unique_ptr<FrameData> prev;
   for (const int frame : frames) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto cur = std::make_unique<FrameData>(load_baked_frame(m, frame));
+    auto cur = std::make_unique<FrameData>(load_baked_frame(m, frame, rules));
     FrameMetrics fm;
     fm.frame = frame;
-    frame_metrics(*cur, exemplar, m.options.patch.radius, o, fm);
+    frame_metrics(*cur, exemplars, m.options.patch.radius, o, fm);
     if (const auto it = population.find(frame); it != population.end()) {
       const Population& pop = it->second;
       fm.born = pop.born, fm.died = pop.died;

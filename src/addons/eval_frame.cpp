@@ -131,7 +131,7 @@ double histogram_w1(const std::vector<double>& a, const std::vector<double>& b) 
   return sum / kBins;
 }
 
-FrameData load_baked_frame(const BakeManifest& m, int frame) {
+FrameData load_baked_frame(const BakeManifest& m, int frame, const LayerRules& rules) {
   FrameData f;
   f.frame = frame;
   const std::string obj = m.frame_file("obj", frame), color_path = m.frame_file("color", frame),
@@ -154,6 +154,15 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
   const int c_r = channel_index(color_names, "R", color_path), c_g = channel_index(color_names, "G", color_path),
             c_b = channel_index(color_names, "B", color_path), c_a = channel_index(color_names, "A", color_path);
   f.n = aov.width;
+  const bool layered = rules.size() > 1;
+  int c_layer = -1;
+  if (layered) {
+    const auto at = std::find(aov_names.begin(), aov_names.end(), "layer");
+    if (at == aov_names.end())
+      throw InputError(aov_path, fmt::format("no channel 'layer', yet the bake names {} exemplar layers", rules.size()),
+                       frame);
+    c_layer = int(at - aov_names.begin());
+  }
 
   // Input velocities: the manifest's meshes (vertex i of the OBJ is vertex i
   // of the input mesh) or its VDB grids.
@@ -164,17 +173,36 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
   source.velocity_grid = m.options.velocity_grid;
   source.allow_zero_velocity = true;  // eval reads what the bake accepted; no velocity is zero velocity
   source.units_ok = true;             // the same: the bake decided (--units-ok)
+  if (layered) source.attributes = rules.file_attributes();
   FrameInput in = read_frame_input(source, frame);
-  if (in.grid) {
-    f.grid = std::move(in.grid);
-  } else {
-    if (in.mesh.vertex_count() != mesh.vertex_count())
-      throw InputError(in.path, fmt::format("has {} vertices but the baked {} has {}: the input changed since the bake",
-                                            in.mesh.vertex_count(), fs::path(obj).filename().string(),
-                                            mesh.vertex_count()),
-                       frame);
-    f.vertex_velocity = std::move(in.mesh.velocities);  // empty: zero velocity (--allow-zero-velocity)
+  if ((!in.grid || layered) && in.mesh.vertex_count() != mesh.vertex_count())
+    throw InputError(in.path, fmt::format("has {} vertices but the baked {} has {}: the input changed since the bake",
+                                          in.mesh.vertex_count(), fs::path(obj).filename().string(),
+                                          mesh.vertex_count()),
+                     frame);
+  // The layer the rules choose: their attributes on the baked mesh (its
+  // vertices and triangles are the input's) with the input's velocity and
+  // PLY properties. LayerField reads the frame while it is built; later
+  // only its mesh.
+  Frame ruled;
+  LayerField field;
+  std::vector<uint8_t> vertex_layer;
+  if (layered) {
+    ruled.number = frame;
+    ruled.path = in.path;
+    ruled.mesh.positions = mesh.positions;
+    ruled.mesh.triangles = mesh.triangles;
+    ruled.mesh.velocities = in.mesh.velocities;
+    ruled.velocity_grid = std::move(in.grid);
+    ruled.attributes = std::move(in.attributes);
+    field = LayerField(rules, ruled);
+    vertex_layer = field.vertex_layers();
+    in.grid = std::move(ruled.velocity_grid);
   }
+  if (in.grid)
+    f.grid = std::move(in.grid);
+  else
+    f.vertex_velocity = std::move(in.mesh.velocities);  // empty: zero velocity (--allow-zero-velocity)
 
   // Chart texels exactly as the bake's atlas defines them, and per-triangle
   // surface area per texel.
@@ -204,6 +232,11 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
   f.pv.resize(count);
   f.covered.resize(count);
   f.rgb.resize(3 * count);
+  if (layered) {
+    f.layer.resize(count);
+    f.rule_layer.resize(count);
+    f.rule_interior.resize(count);
+  }
   parallel_for(count, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const uint32_t texel = f.texels.texel[i];
@@ -222,8 +255,20 @@ FrameData load_baked_frame(const BakeManifest& m, int frame) {
       f.rgb[3 * i] = color.at(x, y, c_r);
       f.rgb[3 * i + 1] = color.at(x, y, c_g);
       f.rgb[3 * i + 2] = color.at(x, y, c_b);
+      if (layered) {
+        const float layer = aov.at(x, y, c_layer);
+        f.layer[i] = layer >= 0 ? int16_t(std::min(std::lround(layer), 32767L)) : int16_t(-1);
+        f.rule_layer[i] = int16_t(field.layer_at(int(f.texels.triangle[i]), b1, b2));
+        f.rule_interior[i] = vertex_layer[t[0]] == vertex_layer[t[1]] && vertex_layer[t[1]] == vertex_layer[t[2]];
+      }
     }
   }, 4096);
+  if (layered)
+    for (std::size_t i = 0; i < count; ++i)
+      if (f.layer[i] >= int(rules.size()))
+        throw InputError(aov_path, fmt::format("layer {} at texel ({}, {}), but the bake names {} layers", f.layer[i],
+                                               f.x_of(i), f.y_of(i), rules.size()),
+                         frame);
   return f;
 }
 

@@ -12,6 +12,7 @@
 
 #include "lapflow/addons/eval.hpp"
 #include "lapflow/atlas/atlas.hpp"
+#include "lapflow/bake/layers.hpp"
 #include "lapflow/bake/manifest.hpp"
 #include "lapflow/core/parallel.hpp"
 #include "lapflow/io/mesh_io.hpp"
@@ -70,6 +71,10 @@ struct FrameData {
   std::vector<float> pu, pv;            ///< per chart texel: AOV patch coordinates
   std::vector<uint8_t> covered;         ///< patch >= 0 or alpha = 1
   std::vector<float> rgb;               ///< per chart texel: linear R, G, B
+  // With exemplar layers (empty with one exemplar), per chart texel:
+  std::vector<int16_t> layer;           ///< the AOV layer, -1 where none
+  std::vector<int16_t> rule_layer;      ///< the layer the rules choose at the surface point
+  std::vector<uint8_t> rule_interior;   ///< the fluid triangle's three vertices choose one layer
   double texel_world = 0;               ///< metres per texel: sqrt(surface area / chart uv area in texels)
   double texel_world_count = 0;         ///< metres per texel: sqrt(surface area / chart texel count)
   std::vector<Vec3> vertex_velocity;    ///< input per-vertex velocity (empty: grid or zero)
@@ -85,8 +90,11 @@ struct FrameData {
 };
 
 /// Frame `frame` of the bake `m`: its UV mesh, colour and AOV atlases and
-/// input velocities. Throws InputError naming a missing or damaged file.
-FrameData load_baked_frame(const BakeManifest& m, int frame);
+/// input velocities; with `rules` of more than one layer (layer_rules of the
+/// manifest's options) also the AOV's layer channel and the layer the rules
+/// choose at each chart texel, from the input mesh's attributes. Throws
+/// InputError naming a missing or damaged file.
+FrameData load_baked_frame(const BakeManifest& m, int frame, const LayerRules& rules = {});
 
 /// Input velocity at chart texel i (m/s): per-vertex velocities interpolated
 /// at the texel's barycentrics, or the grid at `p`.

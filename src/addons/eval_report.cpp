@@ -68,25 +68,59 @@ const std::vector<MetricDef>& metric_defs() {
 
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
+/// Layer l's name (its index when the report does not name it).
+std::string layer_name(const EvalReport& r, int l) {
+  return l >= 0 && std::size_t(l) < r.layers.size() ? r.layers[std::size_t(l)].name : std::to_string(l);
+}
+
+}  // namespace
+
+namespace {
+
+/// Frames, mean, median and max of `get` over the frames where it has a value.
+template <typename Get>
+MetricSummary summarize(const std::vector<FrameMetrics>& frames, std::string key, int layer, Get get) {
+  MetricSummary s;
+  s.key = std::move(key);
+  s.layer = layer;
+  std::vector<float> v;
+  double sum = 0;
+  for (const FrameMetrics& m : frames)
+    if (const double x = get(m); std::isfinite(x)) v.push_back(float(x)), sum += x;
+  s.frames = v.size();
+  if (!v.empty()) {
+    s.mean = sum / double(v.size());
+    s.max = *std::max_element(v.begin(), v.end());
+    s.median = quantile(v, 0.5);
+  }
+  return s;
+}
+
+/// The per-layer metrics summarized (and written per frame) for each layer.
+constexpr std::pair<const char*, double LayerMetrics::*> kLayerMetrics[] = {
+    {"share", &LayerMetrics::share},
+    {"popping", &LayerMetrics::popping},
+    {"contrast", &LayerMetrics::contrast},
+    {"histogram_distance", &LayerMetrics::histogram_distance},
+    {"sliced_wasserstein", &LayerMetrics::sliced_wasserstein},
+};
+
 }  // namespace
 
 std::vector<MetricSummary> summarize_metrics(const std::vector<FrameMetrics>& frames) {
   std::vector<MetricSummary> out;
-  for (const MetricDef& d : metric_defs()) {
-    MetricSummary s;
-    s.key = d.key;
-    std::vector<float> v;
-    double sum = 0;
-    for (const FrameMetrics& m : frames)
-      if (const double x = d.get(m); std::isfinite(x)) v.push_back(float(x)), sum += x;
-    s.frames = v.size();
-    if (!v.empty()) {
-      s.mean = sum / double(v.size());
-      s.max = *std::max_element(v.begin(), v.end());
-      s.median = quantile(v, 0.5);
-    }
-    out.push_back(s);
-  }
+  for (const MetricDef& d : metric_defs()) out.push_back(summarize(frames, d.key, -1, d.get));
+  std::size_t layers = 0;
+  for (const FrameMetrics& m : frames) layers = std::max(layers, m.layers.size());
+  if (layers == 0) return out;
+  out.push_back(summarize(frames, "layer_agreement", -1, [](const FrameMetrics& m) { return m.layer_agreement; }));
+  out.push_back(summarize(frames, "layer_agreement_interior", -1,
+                          [](const FrameMetrics& m) { return m.layer_agreement_interior; }));
+  for (std::size_t l = 0; l < layers; ++l)
+    for (const auto& [key, field] : kLayerMetrics)
+      out.push_back(summarize(frames, key, int(l), [l, field](const FrameMetrics& m) {
+        return l < m.layers.size() ? m.layers[l].*field : kNoValue;
+      }));
   return out;
 }
 
@@ -136,11 +170,42 @@ std::string eval_report_json(const EvalReport& r) {
         {"distortion_max", number(m.distortion_max)},
         {"seconds", m.seconds},
     });
+    if (m.layers.empty()) continue;
+    nlohmann::json& f = frames.back();
+    f["layer_agreement"] = number(m.layer_agreement);
+    f["layer_agreement_texels"] = m.layer_agreement_texels;
+    f["layer_agreement_interior"] = number(m.layer_agreement_interior);
+    f["layer_agreement_interior_texels"] = m.layer_agreement_interior_texels;
+    nlohmann::json layers = nlohmann::json::object();
+    for (std::size_t l = 0; l < m.layers.size(); ++l) {
+      const LayerMetrics& x = m.layers[l];
+      layers[layer_name(r, int(l))] = {
+          {"texels", x.texels},
+          {"share", number(x.share)},
+          {"exemplar_scale", number(x.exemplar_scale)},
+          {"luminance_std", number(x.luminance_std)},
+          {"exemplar_luminance_std", number(x.exemplar_luminance_std)},
+          {"contrast", number(x.contrast)},
+          {"histogram_w1", {number(x.histogram_w1[0]), number(x.histogram_w1[1]), number(x.histogram_w1[2])}},
+          {"histogram_distance", number(x.histogram_distance)},
+          {"sliced_wasserstein", number(x.sliced_wasserstein)},
+          {"surface_windows", x.surface_windows},
+          {"popping_texels", x.popping_texels},
+          {"popping", number(x.popping)},
+      };
+    }
+    f["layers"] = layers;
   }
   nlohmann::json summary = nlohmann::json::object();
-  for (const MetricSummary& s : r.summary)
-    summary[s.key] = {{"frames", s.frames}, {"mean", number(s.mean)}, {"median", number(s.median)}, {"max", number(s.max)}};
-  const nlohmann::json j{{"dir", r.dir},
+  for (const MetricSummary& s : r.summary) {
+    const nlohmann::json value{
+        {"frames", s.frames}, {"mean", number(s.mean)}, {"median", number(s.median)}, {"max", number(s.max)}};
+    if (s.layer < 0)
+      summary[s.key] = value;
+    else
+      summary["layers"][layer_name(r, s.layer)][s.key] = value;
+  }
+  nlohmann::json j{{"dir", r.dir},
                          {"name", r.name},
                          {"mode", r.mode},
                          {"exemplar", r.exemplar},
@@ -153,6 +218,13 @@ std::string eval_report_json(const EvalReport& r) {
                          {"died", r.died},
                          {"frames", frames},
                          {"summary", summary}};
+  if (!r.layers.empty()) {
+    nlohmann::json layers = nlohmann::json::array();
+    for (const EvalLayer& l : r.layers)
+      layers.push_back(
+          {{"name", l.name}, {"exemplar", l.exemplar}, {"exemplar_luminance_std", number(l.exemplar_luminance_std)}});
+    j["layers"] = layers;
+  }
   return j.dump(2) + "\n";
 }
 
@@ -163,11 +235,66 @@ std::string cell(double v, const char* spec, int width) {
   return fmt::format(fmt::runtime(fmt::format("{{:>{}{}}}", width, spec)), v);
 }
 
+/// The exemplar layers' table: per frame the agreement with the rules (all
+/// texels, interior texels) and each layer's share and popping, then the
+/// summary, then each layer's fidelity (means over the frames).
+std::string layer_table(const EvalReport& r) {
+  std::map<std::pair<int, std::string>, const MetricSummary*> s;
+  for (const MetricSummary& x : r.summary) s[{x.layer, x.key}] = &x;
+  auto get = [&](int layer, const char* key, double MetricSummary::*field) {
+    const auto it = s.find({layer, key});
+    return it == s.end() ? kNoValue : it->second->*field;
+  };
+  auto pct = [](double v) { return std::isfinite(v) ? 100 * v : v; };
+  const int n = int(r.layers.size());
+  std::vector<int> width(static_cast<std::size_t>(n));  // of each layer's share column (the name above both of its columns)
+  std::string names = fmt::format("\n{:>24}", ""), header = fmt::format("{:>6} {:>8} {:>8}", "frame", "agree%", "inner%");
+  for (int l = 0; l < n; ++l) {
+    const std::string& name = r.layers[std::size_t(l)].name;
+    width[std::size_t(l)] = std::max(8, int(name.size()) - 9);
+    names += fmt::format(" {:>{}}", name, width[std::size_t(l)] + 9);
+    header += fmt::format(" {:>{}} {:>8}", "share%", width[std::size_t(l)], "pop%");
+  }
+  std::string out = "\nexemplar layers: agree% = texels showing the layer the rules choose there (inner%: away from "
+                    "the rules' boundaries)" + names + "\n" + header + "\n";
+  auto row = [&](const std::string& label, double agree, double inner, const std::function<double(int, bool)>& layer) {
+    std::string line = fmt::format("{:>6} {} {}", label, cell(pct(agree), ".2f", 8), cell(pct(inner), ".2f", 8));
+    for (int l = 0; l < n; ++l)
+      line += fmt::format(" {} {}", cell(pct(layer(l, false)), ".2f", width[std::size_t(l)]),
+                          cell(pct(layer(l, true)), ".2f", 8));
+    return line + "\n";
+  };
+  for (const FrameMetrics& m : r.frames)
+    out += row(std::to_string(m.frame), m.layer_agreement, m.layer_agreement_interior, [&](int l, bool popping) {
+      if (std::size_t(l) >= m.layers.size()) return kNoValue;
+      return popping ? m.layers[std::size_t(l)].popping : m.layers[std::size_t(l)].share;
+    });
+  out += "\n";
+  for (const auto& [label, field] : {std::pair{"mean", &MetricSummary::mean}, std::pair{"median", &MetricSummary::median},
+                                     std::pair{"max", &MetricSummary::max}})
+    out += row(label, get(-1, "layer_agreement", field), get(-1, "layer_agreement_interior", field),
+               [&](int l, bool popping) { return get(l, popping ? "popping" : "share", field); });
+  for (int l = 0; l < n; ++l)
+    out += fmt::format("{}: contrast {}, hist W1 {}, SW {} against {} (means over the frames)\n",
+                       r.layers[std::size_t(l)].name, cell(get(l, "contrast", &MetricSummary::mean), ".3f", 1),
+                       cell(get(l, "histogram_distance", &MetricSummary::mean), ".4f", 1),
+                       cell(get(l, "sliced_wasserstein", &MetricSummary::mean), ".4f", 1),
+                       fs::path(r.layers[std::size_t(l)].exemplar).filename().string());
+  return out;
+}
+
 }  // namespace
 
 std::string eval_report_table(const EvalReport& r) {
-  std::string out = fmt::format("{} ({} mode) in {}\nexemplar {} | atlas {} | r = {:.4g} m | {} fps | rest below {:.4g} m/s\n\n",
-                                r.name, r.mode, r.dir, r.exemplar, r.resolution, r.radius, r.fps, r.rest_speed);
+  std::string exemplar = "exemplar " + r.exemplar;
+  if (!r.layers.empty()) {
+    exemplar = "layers";
+    for (const EvalLayer& l : r.layers)
+      exemplar += fmt::format("{} {} ({})", &l == &r.layers.front() ? "" : ",", l.name,
+                              fs::path(l.exemplar).filename().string());
+  }
+  std::string out = fmt::format("{} ({} mode) in {}\n{} | atlas {} | r = {:.4g} m | {} fps | rest below {:.4g} m/s\n\n",
+                                r.name, r.mode, r.dir, exemplar, r.resolution, r.radius, r.fps, r.rest_speed);
   out += fmt::format("{:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6} {:>8} {:>8} {:>7} {:>7} {:>7}\n",
                      "frame", "cover%", "contrast", "hist W1", "SW", "flow50", "flow90", "pop%", "born", "died",
                      "drift%", "drtex%", "delta50", "delta90", "delta99");
@@ -187,7 +314,8 @@ std::string eval_report_table(const EvalReport& r) {
                m.died ? double(*m.died) : kNoValue, m.drift, m.drift_texel, m.distortion_median, m.distortion_p90,
                m.distortion_p99);
   std::map<std::string, const MetricSummary*> s;
-  for (const MetricSummary& x : r.summary) s[x.key] = &x;
+  for (const MetricSummary& x : r.summary)
+    if (x.layer < 0) s[x.key] = &x;
   auto get = [&](const char* key, double MetricSummary::*field) { return s.count(key) ? s[key]->*field : kNoValue; };
   out += "\n";
   for (const auto& [label, field] : {std::pair{"mean", &MetricSummary::mean}, std::pair{"median", &MetricSummary::median},
@@ -211,6 +339,7 @@ std::string eval_report_table(const EvalReport& r) {
         ratio = std::max(ratio, double(*m.alive) / double(*m.fresh_seeding));
     out += fmt::format("patches alive: at most {:.0f}, at most {:.2f}x a fresh seeding of the same frame\n", alive, ratio);
   }
+  if (!r.layers.empty()) out += layer_table(r);
   return out;
 }
 

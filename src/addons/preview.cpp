@@ -3,6 +3,8 @@
 // preview_label.cpp, the video in preview_video.cpp.
 #include "lapflow/addons/preview.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -37,7 +39,62 @@ PreviewFrame make_preview_frame(UvMesh mesh, Image color, Image displacement, do
   return f;
 }
 
-PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
+std::optional<PreviewShow> parse_preview_show(const std::string& text) {
+  if (text == "color") return PreviewShow::Color;
+  if (text == "layers") return PreviewShow::Layers;
+  return std::nullopt;
+}
+
+Vec3 preview_layer_color(int layer) {
+  static const Vec3 palette[] = {{0.90, 0.22, 0.04}, {0.06, 0.25, 0.90}, {0.10, 0.65, 0.12}, {0.85, 0.70, 0.05},
+                                 {0.65, 0.08, 0.70}, {0.05, 0.65, 0.70}, {0.95, 0.45, 0.55}, {0.40, 0.22, 0.08}};
+  if (layer < 0) return {0.5, 0.5, 0.5};
+  return palette[std::size_t(layer) % std::size(palette)];
+}
+
+Image tint_by_layer(const Image& color, const Image& layers) {
+  if (layers.width != color.width || layers.height != color.height || layers.channels != 1)
+    throw std::invalid_argument("tint_by_layer: the layer image is not one channel of the colour atlas's size");
+  Image out = color;
+  const std::size_t n = std::size_t(color.width) * color.height, ch = std::size_t(color.channels);
+  parallel_for(n, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p) {
+      float* px = &out.pixels[p * ch];
+      const double lum = 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
+      // The square root lifts dark textures (lava's crust) so that their tint still reads.
+      const double shade = 0.3 + 0.7 * std::min(1.0, std::sqrt(std::max(0.0, lum)));
+      const float l = layers.pixels[p];
+      const Vec3 tint = preview_layer_color(l >= 0 ? int(std::lround(l)) : -1);
+      for (int c = 0; c < 3; ++c) px[c] = float(tint[c] * shade);
+    }
+  }, 1 << 14);
+  return out;
+}
+
+namespace {
+
+/// The `layer` channel of frame `frame`'s AOV (PreviewShow::Layers).
+Image read_layer_channel(const BakeManifest& bake, int frame) {
+  const std::string aov = bake.frame_file("aov", frame);
+  std::error_code ec;
+  if (!fs::exists(aov, ec))
+    throw InputError(aov, "missing: --show layers reads the AOV's layer channel; bake (or render) with --aov", frame);
+  const std::vector<std::string> names = image_channel_names(aov);
+  const auto at = std::find(names.begin(), names.end(), "layer");
+  if (at == names.end())
+    throw InputError(aov, "no channel 'layer': the bake has one exemplar, and --show layers needs exemplar layers "
+                          "(bake with --layer)", frame);
+  const Image all = read_image(aov, ColorSpace::Linear);
+  const std::size_t c = std::size_t(at - names.begin()), ch = std::size_t(all.channels);
+  if (c >= ch) throw InputError(aov, "the channel list and the pixels disagree", frame);
+  Image layer(all.width, all.height, 1);
+  for (std::size_t p = 0; p < layer.pixels.size(); ++p) layer.pixels[p] = all.pixels[p * ch + c];
+  return layer;
+}
+
+}  // namespace
+
+PreviewFrame load_preview_frame(const BakeManifest& bake, int frame, PreviewShow show) {
   const std::string obj = bake.frame_file("obj", frame), color = bake.frame_file("color", frame),
                     disp = bake.frame_file("disp", frame);
   std::error_code ec;
@@ -48,6 +105,14 @@ PreviewFrame load_preview_frame(const BakeManifest& bake, int frame) {
     throw InputError(obj, "no texture coordinates (vt): not a lapflow bake frame", frame);
   Image c = read_image(color, ColorSpace::Linear);
   if (c.channels < 3) throw InputError(color, "the colour atlas needs R, G, B channels", frame);
+  if (show == PreviewShow::Layers) {
+    const Image layer = read_layer_channel(bake, frame);
+    if (layer.width != c.width || layer.height != c.height)
+      throw InputError(bake.frame_file("aov", frame),
+                       fmt::format("{}x{}, but the colour atlas is {}x{}", layer.width, layer.height, c.width, c.height),
+                       frame);
+    c = tint_by_layer(c, layer);
+  }
   Image h;
   if (fs::exists(disp, ec)) {
     h = read_image(disp, ColorSpace::Linear);

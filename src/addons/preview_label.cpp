@@ -47,4 +47,25 @@ bool draw_label(Image& img, int x, int y, const std::string& text, int size, con
   return ok;
 }
 
+bool draw_layer_legend(Image& img, const std::vector<std::string>& names, int size, const std::string& font_path) {
+  if (img.empty() || img.channels < 3 || names.empty()) return false;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(font_path, ec)) return false;
+  // Lines as tall as draw_label's box, a swatch as wide, from the bottom-left corner.
+  const int pad = std::max(2, size / 4), line = size + 2 * pad, gap = std::max(2, size / 4), margin = size / 2;
+  const int n = int(names.size());
+  for (int i = 0; i < n; ++i) {
+    const int y = img.height - margin - (n - i) * line - (n - i - 1) * gap;
+    if (!draw_label(img, margin + line + gap, y, names[std::size_t(i)], size, font_path)) return false;
+    const Vec3 c = preview_layer_color(i);
+    for (int py = std::max(0, y); py < std::min(img.height, y + line); ++py)
+      for (int px = std::max(0, margin); px < std::min(img.width, margin + line); ++px) {
+        // A dark rim of one pixel keeps light swatches apart from a light ground.
+        const bool rim = py == y || px == margin || py == y + line - 1 || px == margin + line - 1;
+        for (int k = 0; k < 3; ++k) img.at(px, py, k) = rim ? 0.02f : float(c[k]);
+      }
+  }
+  return true;
+}
+
 }  // namespace lapflow

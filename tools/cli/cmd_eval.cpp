@@ -79,11 +79,17 @@ void add_eval_command(CLI::App& app) {
       "  pop%         surface whose patch changed since the previous frame (back-advected); born / died patches\n"
       "  drift%       texels at rest (|v| <= --min-speed) whose texture changed since the previous frame\n"
       "  delta        distortion max(s1, 1/s2) of the patch map: median, 90th percentile, max\n"
+      "A bake with exemplar layers (--layer) is compared layer by layer with each layer's exemplar (the frame's\n"
+      "contrast and fidelity are the texel-weighted means), and a second table gives per frame:\n"
+      "  agree%       texels showing the layer the rules choose at their surface point (the input mesh's\n"
+      "               attributes); inner%: the same where the fluid triangle's vertices all choose one layer\n"
+      "  share%, pop% per layer: its share of the covered texels, and the popping of its texels\n"
       "Reads NAME.bake.json in DIR and the input meshes (for velocities) it names. docs/eval.md has the details.\n\n"
       "Exit codes: 0 ok, 2 bad input or usage (the message names the file), 1 internal error.");
   cmd->add_option("dir", c.dir, "Bake folder (holding NAME.bake.json) or the manifest file")->required();
   cmd->add_option("--exemplar", c.exemplar,
-                  "Exemplar to compare with: an image or a shipped exemplar's name (default: the bake's)");
+                  "Exemplar to compare with: an image or a shipped exemplar's name (default: the bake's; not with "
+                  "exemplar layers)");
   cmd->add_option("--frames", c.frames, "Frame range A-B (default: every frame of the bake)");
   c.json = cmd->add_option("--json", c.json_path,
                            "Print JSON (per frame + summary) instead of the table, or with FILE write it there")

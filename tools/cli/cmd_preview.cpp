@@ -15,7 +15,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct PreviewCli {
-  std::string dir, frames, out, camera, up = "z";
+  std::string dir, frames, out, camera, up = "z", show = "color";
   std::vector<std::string> compare, labels;
   bool turntable = false, no_video = false, no_labels = false, no_ground = false;
   int width = 0, height = 0, samples = 4, views = 48;
@@ -65,6 +65,7 @@ void run_preview(PreviewCli& c) {
   o.look.up = *up;
   o.look.bump = c.bump;
   o.look.ground = !c.no_ground;
+  const PreviewShow show = *parse_preview_show(c.show);  // CLI::IsMember checked it
 
   // One camera for the whole sequence: the bounding box of every frame of every bake.
   info("lapflow preview: {} frame{} of {} ({}){}", frames.size(), frames.size() == 1 ? "" : "s", main.name,
@@ -132,7 +133,7 @@ void run_preview(PreviewCli& c) {
     const PreviewCamera& cam = cameras[std::size_t(i)];
     if (loaded.empty() || !spin_one) {
       loaded.clear();
-      for (const BakeManifest& b : bakes) loaded.push_back(load_preview_frame(b, frame));
+      for (const BakeManifest& b : bakes) loaded.push_back(load_preview_frame(b, frame, show));
     }
     const auto loaded_at = std::chrono::steady_clock::now();
     const std::clock_t cpu_start = std::clock();  // process CPU time, all threads
@@ -140,6 +141,11 @@ void run_preview(PreviewCli& c) {
     for (std::size_t b = 0; b < bakes.size(); ++b) {
       panels.push_back(render_preview(loaded[b], cam, bounds, o));
       if (comparing) label(panels.back(), label_size / 2, label_size / 2, labels[b], false);
+      if (show == PreviewShow::Layers && !c.no_labels && !font_warned) {
+        std::vector<std::string> names;
+        for (const ExemplarLayer& l : bakes[b].options.layers) names.push_back(l.name);
+        draw_layer_legend(panels.back(), names, label_size, font);  // a missing font: label() warns below
+      }
     }
     const auto rendered_at = std::chrono::steady_clock::now();
     const double render_cpu = double(std::clock() - cpu_start) / CLOCKS_PER_SEC;
@@ -198,7 +204,9 @@ void add_preview_command(CLI::App& app) {
       "  NAME.preview.mp4         H.264 of those, when ffmpeg is on PATH (Debian package ffmpeg)\n"
       "  NAME.turntable.V.png     --turntable of a single frame: V = 1..--views around it\n"
       "--compare puts other bakes of the same sequence beside DIR's, each panel labelled with its mode\n"
-      "(erosion, blend, advect) or its folder name. Every file is written atomically. Pictures do not depend\n"
+      "(erosion, blend, advect) or its folder name. --show layers tints the liquid by each texel's exemplar\n"
+      "layer (the layer channel of NAME.aov.N.exr: a bake with --layer and --aov), one colour per layer over\n"
+      "the texture's luminance, with a legend. Every file is written atomically. Pictures do not depend\n"
       "on --threads.\n\n"
       "Exit codes: 0 ok, 2 bad input or usage (the message names the file), 1 internal error.");
   cmd->add_option("dir", c.dir, "Bake folder (holding NAME.bake.json)")->required();
@@ -229,6 +237,11 @@ void add_preview_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--bump", c.bump, "Bump height: displacement 1 = BUMP x the bake's radius; 0 = no bump")
       ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  cmd->add_option("--show", c.show,
+                  "What the liquid shows: color (the colour atlas) or layers (each exemplar layer in its own colour "
+                  "over the texture's luminance, with a legend; needs a bake with --layer and --aov)")
+      ->check(CLI::IsMember({"color", "layers"}))
       ->capture_default_str();
   cmd->add_flag("--no-ground", c.no_ground, "No ground plane (sky gradient all around)");
   cmd->add_flag("--no-labels", c.no_labels, "No text on the pictures");

@@ -6,6 +6,9 @@
 /// and over the sequence. Everything is measured from the files of a bake
 /// folder (NAME.bake.json, UV meshes, colour atlases, the AOVs of
 /// `bake --aov`, NAME.stats.jsonl) and the input meshes the manifest names.
+/// A bake with exemplar layers is compared layer by layer with each layer's
+/// exemplar, and gains per-layer coverage and popping and the agreement of
+/// the shown layer with the rules (docs/eval.md, "Exemplar layers").
 /// Deterministic at any thread count.
 #include <array>
 #include <cstdint>
@@ -20,7 +23,9 @@
 namespace lapflow {
 
 struct EvalOptions {
-  std::string exemplar;               ///< colour exemplar; empty = the one the bake used (manifest)
+  /// Colour exemplar; empty = the one the bake used (manifest). Not with a
+  /// bake of exemplar layers (each layer is compared with its own).
+  std::string exemplar;
   std::optional<FrameRange> frames;   ///< default: every frame of the bake
   std::optional<double> min_speed;    ///< m/s: rest threshold of the drift metric (default: the bake's --min-speed)
   int windows = 16384;                ///< 5x5 windows per side sampled for the sliced Wasserstein distance
@@ -35,6 +40,23 @@ struct EvalOptions {
 
 constexpr double kNoValue = std::numeric_limits<double>::quiet_NaN();
 
+/// One exemplar layer's figures on one frame (a bake with layers only).
+struct LayerMetrics {
+  /// Covered chart texels whose AOV layer is this one, and their share of
+  /// the covered texels that have a layer (the shares of a frame sum to 1).
+  std::size_t texels = 0;
+  double share = kNoValue;
+  /// The exemplar comparison over those texels against this layer's
+  /// exemplar, as FrameMetrics defines it for the whole surface.
+  double exemplar_scale = kNoValue, luminance_std = kNoValue, exemplar_luminance_std = kNoValue, contrast = kNoValue;
+  std::array<double, 3> histogram_w1{kNoValue, kNoValue, kNoValue};
+  double histogram_distance = kNoValue, sliced_wasserstein = kNoValue;
+  std::size_t surface_windows = 0;
+  /// Popping of the compared texels whose layer (on this frame) is this one.
+  std::size_t popping_texels = 0;
+  double popping = kNoValue;
+};
+
 /// Metrics of one frame. Values that need a previous frame (flow, popping,
 /// drift) or samples that a frame does not have are NaN ("no value").
 struct FrameMetrics {
@@ -46,7 +68,10 @@ struct FrameMetrics {
   // exemplar pixels per atlas texel (exemplar width * texel / 2r).
   double texel_world_size = kNoValue, exemplar_scale = kNoValue;
   // Contrast: area-weighted std of linear luminance over covered texels /
-  // the std of the exemplar seen at the atlas texel scale.
+  // the std of the exemplar seen at the atlas texel scale. With exemplar
+  // layers, this and the fidelity figures below (and exemplar_scale) are
+  // the means over the layers of each layer's figure (LayerMetrics)
+  // weighted by its texels.
   double luminance_std = kNoValue, exemplar_luminance_std = kNoValue, contrast = kNoValue;
   // Fidelity: W1 between the area-weighted R, G, B distributions of the
   // surface and the exemplar's (1024 bins on [0,1]), their mean, and the
@@ -107,21 +132,39 @@ struct FrameMetrics {
   // estimated from neighbouring texels of one patch and chart.
   std::size_t distortion_texels = 0;
   double distortion_median = kNoValue, distortion_p90 = kNoValue, distortion_p99 = kNoValue, distortion_max = kNoValue;
+  /// With exemplar layers: one per layer, in the AOV's order (empty with one exemplar).
+  std::vector<LayerMetrics> layers;
+  /// With exemplar layers: of the covered chart texels with a layer, the
+  /// share whose AOV layer is the one the rules choose at the texel's surface
+  /// point; and the same over the interior texels, whose fluid triangle's
+  /// three vertices all choose one layer (away from the rules' boundaries,
+  /// which a patch keeping its birth layer may overlap).
+  std::size_t layer_agreement_texels = 0, layer_agreement_interior_texels = 0;
+  double layer_agreement = kNoValue, layer_agreement_interior = kNoValue;
   double seconds = 0;
 };
 
 /// One metric over the frames where it has a value.
 struct MetricSummary {
-  std::string key;  ///< as in the JSON (e.g. "contrast", "flow_median")
+  std::string key;  ///< as in the JSON (e.g. "contrast", "flow_median"; per layer "share", "popping", ...)
+  int layer = -1;   ///< the layer (index into EvalReport::layers) of a per-layer metric; -1: the whole surface
   std::size_t frames = 0;
   double mean = kNoValue, median = kNoValue, max = kNoValue;
 };
 
+/// One exemplar layer of the bake evaluated.
+struct EvalLayer {
+  std::string name, exemplar;                 ///< the layer's name and its colour exemplar
+  double exemplar_luminance_std = kNoValue;   ///< at the exemplar's own resolution
+};
+
 struct EvalReport {
-  std::string dir, name, mode, exemplar;
+  std::string dir, name, mode;
+  std::string exemplar;  ///< the colour exemplar; with layers "NAME=COLOR,..." of every layer
   int resolution = 0;
   double radius = 0, fps = 0, rest_speed = 0;
-  double exemplar_luminance_std = 0;  ///< at the exemplar's own resolution
+  double exemplar_luminance_std = 0;  ///< at the exemplar's own resolution (NaN with layers: see `layers`)
+  std::vector<EvalLayer> layers;      ///< with exemplar layers, in the AOV's order; empty with one exemplar
   std::vector<FrameMetrics> frames;
   std::vector<MetricSummary> summary;
   std::size_t born = 0, died = 0;  ///< over the evaluated frames
@@ -135,13 +178,20 @@ struct EvalReport {
 EvalReport evaluate_bake(const std::string& dir, const EvalOptions& options = {},
                          const std::function<void(const FrameMetrics&)>& on_frame = {});
 
-/// Mean, median and max of every metric over the frames (fills report.summary).
+/// Mean, median and max of every metric over the frames (fills
+/// report.summary); with exemplar layers also layer_agreement,
+/// layer_agreement_interior and, per layer, share, popping, contrast,
+/// histogram_distance and sliced_wasserstein.
 std::vector<MetricSummary> summarize_metrics(const std::vector<FrameMetrics>& frames);
 
 /// The report as JSON: settings, "frames" (one object per frame), "summary"
-/// (per metric: frames, mean, median, max). NaN is written as null.
+/// (per metric: frames, mean, median, max). NaN is written as null. With
+/// exemplar layers: "layers" (name, exemplar, exemplar_luminance_std per
+/// layer), and per frame and in the summary "layer_agreement",
+/// "layer_agreement_interior" and "layers" (an object per layer name).
 std::string eval_report_json(const EvalReport& report);
-/// A table for a terminal: one row per frame, then the summary.
+/// A table for a terminal: one row per frame, then the summary; with
+/// exemplar layers a second table of the layers' shares, popping and agreement.
 std::string eval_report_table(const EvalReport& report);
 
 /// Writes one PNG per metric over the frames into `dir` (created) with

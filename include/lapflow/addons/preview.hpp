@@ -3,7 +3,8 @@
 /// (Embree behind it), the first thing a user looks at. A frame's UV mesh is
 /// shaded with its colour atlas, its displacement atlas as bump, a key light
 /// with soft ray-traced shadows, a sky fill, a little liquid specular and a
-/// ground plane; several bakes of one sequence can be put side by side.
+/// ground plane; several bakes of one sequence can be put side by side. With
+/// exemplar layers the colour may show each texel's layer instead (PreviewShow).
 #include <functional>
 #include <optional>
 #include <string>
@@ -70,15 +71,42 @@ struct PreviewFrame {
   double radius = 0;          ///< patch radius of the bake (metres), the bump's unit
 };
 
+/// What the pictures show on the liquid (`lapflow preview --show`).
+enum class PreviewShow {
+  Color,   ///< the colour atlas
+  /// The colour atlas's luminance tinted by each texel's exemplar layer (the
+  /// AOV's `layer` channel of a bake with exemplar layers, docs/layers.md).
+  Layers,
+};
+
+/// "color" or "layers"; nullopt for any other text.
+std::optional<PreviewShow> parse_preview_show(const std::string& text);
+
+/// The tint of exemplar layer `layer` (its index, as the AOV holds it) in
+/// PreviewShow::Layers pictures: linear RGB from a fixed palette of 8
+/// distinct colours (orange, blue, green, yellow, magenta, cyan, pink,
+/// brown), repeating; a neutral grey for -1 (no layer).
+Vec3 preview_layer_color(int layer);
+
+/// The colour atlas `color` (linear RGB(A)) tinted by `layers` (one channel,
+/// the same size: each texel's layer, -1 where none): RGB = tint * (0.3 +
+/// 0.7 min(1, sqrt(luminance))), so that the texture stays visible in every
+/// layer's colour; alpha is kept. Throws std::invalid_argument when the
+/// sizes differ.
+Image tint_by_layer(const Image& color, const Image& layers);
+
 /// A frame from its parts: `color` is the RGB(A) linear atlas, `displacement`
 /// one channel in exemplar units (empty: no bump; resampled to the colour
 /// atlas' size when it differs).
 PreviewFrame make_preview_frame(UvMesh mesh, Image color, Image displacement, double radius);
 
 /// Reads frame `frame` of a bake: NAME.N.obj, NAME.color.N.exr and
-/// NAME.disp.N.exr (the latter optional: no bump when it is missing). Throws
-/// InputError naming the missing or malformed file.
-PreviewFrame load_preview_frame(const BakeManifest& bake, int frame);
+/// NAME.disp.N.exr (the latter optional: no bump when it is missing); with
+/// PreviewShow::Layers also NAME.aov.N.exr, whose `layer` channel tints the
+/// colour (tint_by_layer). Throws InputError naming the missing or malformed
+/// file: with PreviewShow::Layers, an AOV that is missing (a bake without
+/// --aov) or has no `layer` channel (a bake of one exemplar).
+PreviewFrame load_preview_frame(const BakeManifest& bake, int frame, PreviewShow show = PreviewShow::Color);
 
 /// Where a sequence's liquid goes: the bounding box of every frame and up to
 /// `max_points` of its vertices (evenly strided per frame) for framing.
@@ -138,6 +166,13 @@ Image render_preview(const PreviewFrame& frame, const PreviewCamera& camera, con
 /// Returns false (and draws nothing) when the font cannot be loaded.
 bool draw_label(Image& img, int x, int y, const std::string& text, int size, const std::string& font_path,
                 bool align_right = false);
+
+/// The legend of a PreviewShow::Layers picture at its bottom-left corner:
+/// one line per layer, bottom line last, each a square swatch of
+/// preview_layer_color(index) and the layer's name as draw_label draws it
+/// `size` pixels high. Returns false (and draws nothing) when the font
+/// cannot be loaded.
+bool draw_layer_legend(Image& img, const std::vector<std::string>& names, int size, const std::string& font_path);
 
 /// The font labels are drawn with: $LAPFLOW_FONT when set, else DejaVu Sans
 /// (Debian's fonts-dejavu-core).
