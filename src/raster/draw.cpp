@@ -128,14 +128,16 @@ namespace {
 // w is linear on the patch triangle: `slope` is its gradient's length in
 // uv, so w + slope x reach bounds w within the reach (weight_slope).
 // `sure` (sure_passes) says where the answer is known for the whole triangle.
-inline bool passes(const RasterContext& ctx, const Patch& patch, const uint64_t* ground, int32_t idx, int x, int y,
-                   double u, double v, double w, double slope, uint8_t sure = 0) {
+// `layer` is the patch's (RasterContext::layer_of), looked up once per patch.
+inline bool passes(const RasterContext& ctx, const Patch& patch, const LayerMaps& layer, const ErosionMap& erosion,
+                   const uint64_t* ground, int32_t idx, int x, int y, double u, double v, double w, double slope,
+                   uint8_t sure = 0) {
   if (ctx.hold && held_at(patch.held, u, v)) {
     if (sure & kSureHeld) return true;
     const double r = ctx.held_reach;
-    return keeps_held(ctx.layer_of(patch).held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
+    return keeps_held(layer.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
-  if (!(sure & kSureKeeps) && !keeps(ctx.layer_of(patch).erosion(), u, v, w, ctx.mode)) return false;
+  if (!(sure & kSureKeeps) && !keeps(erosion, u, v, w, ctx.mode)) return false;
   return !ground || held_at(ground, u, v) || !interior_texel(ctx, std::size_t(idx), x, y);
 }
 
@@ -213,6 +215,8 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec
   if (!b.init(P)) return;
   const double slope = ctx.hold ? weight_slope(uv, w) : 0;
   const uint64_t* ground = rest_ground(ctx, std::size_t(key >> 32));
+  const LayerMaps& layer = ctx.layer_of(patch);
+  const ErosionMap& erosion = layer.erosion();
   const int x0 = std::max(cx0, int(std::ceil(std::min({P[0].x, P[1].x, P[2].x}) - 1e-7)));
   const int x1 = std::min(cx1, int(std::floor(std::max({P[0].x, P[1].x, P[2].x}) + 1e-7)));
   const int y0 = std::max(cy0, int(std::ceil(std::min({P[0].y, P[1].y, P[2].y}) - 1e-7)));
@@ -231,7 +235,7 @@ void draw_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, const Vec
       const double u = l0 * uv[0].x + l1 * uv[1].x + l2 * uv[2].x;
       const double v = l0 * uv[0].y + l1 * uv[1].y + l2 * uv[2].y;
       const double wt = l0 * w[0] + l1 * w[1] + l2 * w[2];
-      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, slope)) continue;
+      if (!passes(ctx, patch, layer, erosion, ground, idx, x, y, u, v, wt, slope)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
@@ -448,6 +452,8 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
   }
   const int bx0 = box.x0, by0 = box.y0, bx1 = box.x1, by1 = box.y1;
   const std::size_t W = box.width(), H = box.height();
+  const LayerMaps& layer = ctx.layer_of(patch);
+  const ErosionMap& erosion = layer.erosion();
   // Pixel (x, y), texel idx, is a texel of this chart: a whole tile of it
   // says so without the texel's triangle (a load from arrays of a texel's
   // size, the draw's main cost).
@@ -539,8 +545,8 @@ void draw_chart_group(RasterContext& ctx, Sink& sink, const Patch& patch, std::s
       const double u = l0 * t.uv[0].x + l1 * t.uv[1].x + l2 * t.uv[2].x;
       const double v = l0 * t.uv[0].y + l1 * t.uv[1].y + l2 * t.uv[2].y;
       const double wt = l0 * t.w[0] + l1 * t.w[1] + l2 * t.w[2];
-      if (t.sure == kSureUnknown) t.sure = sure_passes(ctx, ctx.layer_of(patch), t.uv, t.w, t.slope);
-      if (!passes(ctx, patch, ground, idx, x, y, u, v, wt, t.slope, t.sure)) continue;
+      if (t.sure == kSureUnknown) t.sure = sure_passes(ctx, layer, t.uv, t.w, t.slope);
+      if (!passes(ctx, patch, layer, erosion, ground, idx, x, y, u, v, wt, t.slope, t.sure)) continue;
       sink.put(idx, x, y, key, u, v, wt);
     }
   }
