@@ -24,7 +24,7 @@ std::size_t char_length(std::string_view s, std::size_t pos) {
   return n;
 }
 
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f'; }
+bool is_rule_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f'; }
 bool is_digit(char c) { return c >= '0' && c <= '9'; }
 bool is_name_start(char c) { return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_'; }
 bool is_name_char(char c) { return is_name_start(c) || is_digit(c); }
@@ -76,7 +76,7 @@ struct Rule::Parser {
   // ---- tokens -------------------------------------------------------------
   void advance() {
     std::size_t p = tok.end;
-    while (p < text.size() && is_space(text[p])) ++p;
+    while (p < text.size() && is_rule_space(text[p])) ++p;
     tok = Token{Tok::kEnd, p, p, 0};
     if (p == text.size()) return;
     const char c = text[p];

@@ -32,7 +32,7 @@ std::vector<Vec3> vertex_normals(const TriMesh& m) {
 
 namespace {
 
-bool has_repeated_index(const Tri& f) { return f[0] == f[1] || f[1] == f[2] || f[0] == f[2]; }
+bool repeats_a_corner(const Tri& f) { return f[0] == f[1] || f[1] == f[2] || f[0] == f[2]; }
 
 /// 1 for each vertex on an edge that only one triangle uses. Each edge is
 /// bucketed under its lower vertex (a counting sort), so the work is linear in
@@ -41,14 +41,14 @@ std::vector<uint8_t> boundary_vertices(const TriMesh& m) {
   const std::size_t nv = m.positions.size();
   std::vector<std::size_t> offset(nv + 1, 0);
   for (const Tri& f : m.triangles)
-    if (!has_repeated_index(f))
+    if (!repeats_a_corner(f))
       for (int k = 0; k < 3; ++k) ++offset[std::min(f[k], f[(k + 1) % 3]) + 1];
   std::partial_sum(offset.begin(), offset.end(), offset.begin());
   std::vector<int32_t> upper(offset[nv]);
   {
     std::vector<std::size_t> fill(offset.begin(), offset.end() - 1);
     for (const Tri& f : m.triangles)
-      if (!has_repeated_index(f))
+      if (!repeats_a_corner(f))
         for (int k = 0; k < 3; ++k) {
           const int32_t a = f[k], b = f[(k + 1) % 3];
           upper[fill[std::min(a, b)]++] = std::max(a, b);
@@ -75,7 +75,7 @@ std::vector<float> vertex_mean_curvature(const TriMesh& m) {
   // One serial pass in triangle order: the sums, hence the result, do not
   // depend on the thread count.
   for (const Tri& f : m.triangles) {
-    if (has_repeated_index(f)) continue;
+    if (repeats_a_corner(f)) continue;
     const Vec3 p[3] = {m.positions[f[0]], m.positions[f[1]], m.positions[f[2]]};
     const Vec3 n2 = cross(p[1] - p[0], p[2] - p[0]);
     const double area2 = norm(n2);  // twice the triangle's area
