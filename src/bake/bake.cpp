@@ -107,6 +107,9 @@ BakeMemoryEstimate resolve_bake_options(BakeOptions& o) {
   o.raster.radius = o.patch.radius;
   o.raster.aov = o.aov;
   o.raster.gutter = o.atlas.gutter;
+  o.raster.clock.rate = o.exemplar_fps > 0 ? o.exemplar_fps / o.fps : 1.0;
+  o.raster.clock.loop = o.exemplar_loop;
+  o.raster.clock.seed = o.seed;
   o.weights.keep_at_rest = o.raster.hold;
   return estimate;
 }
@@ -242,6 +245,7 @@ void render_frame(Frame& frame, const PatchSet& patches, ExemplarLayers exemplar
   FrameStats& st = frame.stats;
   RasterOptions output = o.raster;
   output.held_texel = o.track_texel;
+  output.clock.frame = frame.number;
   // The writer's pixels as the resolve makes them (no float images).
   output.half_images = o.exr.type == ExrPixelType::Half;
   frame.textures = output_pass(frame.mesh, frame.atlas, exemplar, output, o.weights,
@@ -350,6 +354,7 @@ RasterStats track_frame(Frame& cur, const Frame* prev, PatchSet& patches, Exempl
   // carries over is decided here: no image.
   RasterOptions tracking = o.raster;
   tracking.held_texel = o.track_texel;
+  tracking.clock.frame = cur.number;
   Stopwatch step;
   const SurfaceAdjacency adjacency = build_surface_adjacency(cur.mesh);
   const double seconds_adjacency = step.lap();

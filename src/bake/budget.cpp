@@ -127,20 +127,30 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
     }
     s.growth = largest / first_bytes;
   }
+  // An animated exemplar's first frame, and its frame count.
+  const auto header = [](const std::string& path, std::size_t* frames = nullptr) {
+    if (!is_exemplar_sequence(path)) return read_image_header(path);
+    const FramePattern pattern(path);
+    const std::vector<int> on_disk = pattern.frames_on_disk();
+    if (on_disk.empty()) throw InputError(path, "no frame of this exemplar sequence is on disk");
+    if (frames) *frames = on_disk.size();
+    return read_image_header(pattern.path(on_disk.front()));
+  };
   if (o.layers.empty()) {
-    s.color = read_image_header(o.exemplar_color);
-    if (!o.exemplar_feature.empty()) s.feature = read_image_header(o.exemplar_feature);
-    if (!o.exemplar_displacement.empty()) s.displacement = read_image_header(o.exemplar_displacement);
+    s.color = header(o.exemplar_color, &s.frames);
+    if (!o.exemplar_feature.empty()) s.feature = header(o.exemplar_feature);
+    if (!o.exemplar_displacement.empty()) s.displacement = header(o.exemplar_displacement);
     return s;
   }
   for (const ExemplarLayer& layer : o.layers) {
     BakeInputSizes::Layer& l = s.layers.emplace_back();
     l.color_path = layer.color, l.feature_path = layer.feature, l.displacement_path = layer.displacement;
-    l.color = read_image_header(layer.color);
-    if (!layer.feature.empty()) l.feature = read_image_header(layer.feature);
-    if (!layer.displacement.empty()) l.displacement = read_image_header(layer.displacement);
+    l.color = header(layer.color, &l.frames);
+    if (!layer.feature.empty()) l.feature = header(layer.feature);
+    if (!layer.displacement.empty()) l.displacement = header(layer.displacement);
   }
   s.color = s.layers[0].color, s.feature = s.layers[0].feature, s.displacement = s.layers[0].displacement;
+  s.frames = s.layers[0].frames;
   return s;
 }
 
@@ -188,9 +198,10 @@ BakeMemoryEstimate estimate_bake_memory(const BakeOptions& o, const BakeInputSiz
     return color.decoded_bytes() + feature.decoded_bytes() + disp.decoded_bytes() +
            double(color.width) * double(color.height) * kExemplarPixelBytes;
   };
-  e.exemplar = exemplar_bytes(s.color, s.feature, s.displacement);
+  e.exemplar = double(s.frames) * exemplar_bytes(s.color, s.feature, s.displacement);
   for (std::size_t l = 1; l < s.layers.size(); ++l)
-    e.exemplar += exemplar_bytes(s.layers[l].color, s.layers[l].feature, s.layers[l].displacement);
+    e.exemplar += double(s.layers[l].frames) *
+                  exemplar_bytes(s.layers[l].color, s.layers[l].feature, s.layers[l].displacement);
   e.base = kBaseBytes;
   e.total = e.atlas + e.tracking + e.patch_bytes + e.state + e.seeding + e.meshes + e.exemplar + e.base;
   return e;
@@ -205,7 +216,8 @@ BakeMemoryEstimate check_bake_budget(const BakeOptions& o, const BakeInputSizes&
   // header is absurd (a 1 KB PNG that claims 100000x100000).
   std::vector<BakeInputSizes::Layer> images = s.layers;
   if (images.empty())
-    images.push_back({o.exemplar_color, o.exemplar_feature, o.exemplar_displacement, s.color, s.feature, s.displacement});
+    images.push_back({o.exemplar_color, o.exemplar_feature, o.exemplar_displacement, s.color, s.feature, s.displacement,
+                      s.frames});
   for (const BakeInputSizes::Layer& l : images) {
     check_image_budget(l.color_path, l.color, 4.0 * l.color.channels + kExemplarPixelBytes, budget);
     if (l.feature.width > 0) check_image_budget(l.feature_path, l.feature, 4.0 * l.feature.channels + 8, budget);

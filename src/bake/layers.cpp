@@ -2,6 +2,9 @@
 // attributes, the frame's layer field and the layers' exemplars.
 #include "lapflow/bake/layers.hpp"
 
+#include <fmt/format.h>
+#include <zlib.h>
+
 #include <algorithm>
 #include <cctype>
 #include <limits>
@@ -14,57 +17,6 @@
 #include "lapflow/core/errors.hpp"
 
 namespace lapflow {
-
-bool is_layer_name(const std::string& name) {
-  return !name.empty() && std::isalpha(static_cast<unsigned char>(name[0])) &&
-         std::all_of(name.begin(), name.end(),
-                     [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-'; });
-}
-
-ExemplarLayer parse_layer(const std::string& text) {
-  const std::size_t eq = text.find('=');
-  if (eq == std::string::npos)
-    throw std::invalid_argument("a layer NAME=COLOR[,FEATURE[,DISP]] (no '=')");
-  ExemplarLayer layer;
-  layer.name = text.substr(0, eq);
-  if (!is_layer_name(layer.name))
-    throw std::invalid_argument("a layer NAME=COLOR[,FEATURE[,DISP]] (a name is letters, digits, '_' and '-')");
-  std::vector<std::string> files;
-  for (std::size_t at = eq + 1;;) {
-    const std::size_t comma = text.find(',', at);
-    files.push_back(text.substr(at, comma == std::string::npos ? std::string::npos : comma - at));
-    if (comma == std::string::npos) break;
-    at = comma + 1;
-  }
-  if (files.size() > 3 || files[0].empty())
-    throw std::invalid_argument("a layer NAME=COLOR[,FEATURE[,DISP]] (" +
-                                std::string(files[0].empty() ? "no colour image" : "more than three files") + ")");
-  layer.color = files[0];
-  if (files.size() > 1) layer.feature = files[1];
-  if (files.size() > 2) layer.displacement = files[2];
-  return layer;
-}
-
-std::string layer_text(const ExemplarLayer& layer) {
-  std::string text = layer.name + "=" + layer.color;
-  if (!layer.feature.empty() || !layer.displacement.empty()) text += "," + layer.feature;
-  if (!layer.displacement.empty()) text += "," + layer.displacement;
-  return text;
-}
-
-std::pair<std::string, std::string> parse_layer_rule(const std::string& text) {
-  const std::size_t colon = text.find(':');
-  if (colon == std::string::npos) throw std::invalid_argument("a layer's rule NAME:RULE (no ':')");
-  std::string name = text.substr(0, colon), rule = text.substr(colon + 1);
-  if (!is_layer_name(name))
-    throw std::invalid_argument("a layer's rule NAME:RULE (a name is letters, digits, '_' and '-')");
-  try {
-    Rule::parse(rule);
-  } catch (const RuleError& e) {
-    throw std::invalid_argument("a rule: " + std::string(e.what()));
-  }
-  return {std::move(name), std::move(rule)};
-}
 
 std::vector<std::string> LayerRules::file_attributes() const {
   std::vector<std::string> out;
@@ -195,33 +147,53 @@ std::vector<uint8_t> LayerField::vertex_layers() const {
   return out;
 }
 
-std::string BakeExemplars::feature_digest() const {
-  if (images.size() == 1 && names.front().empty()) return exemplar_feature_digest(images.front().feature);
+namespace {
+
+// One frame's digest alone; an animated exemplar's frames' chained.
+std::string sequence_digest(const std::vector<std::string>& frames) {
+  if (frames.size() == 1) return frames.front();
+  uLong crc = crc32(0, nullptr, 0);
+  for (const std::string& f : frames) crc = crc32(crc, reinterpret_cast<const Bytef*>(f.data()), uInt(f.size()));
+  return fmt::format("{:08x}/{}", uint32_t(crc), frames.size());
+}
+
+std::string joined(const std::vector<std::string>& names, const std::vector<std::string>& digests) {
+  if (digests.size() == 1 && names.front().empty()) return digests.front();
   std::string out;
-  for (std::size_t l = 0; l < images.size(); ++l)
-    out += (l ? "," : "") + names[l] + ":" + exemplar_feature_digest(images[l].feature);
+  for (std::size_t l = 0; l < digests.size(); ++l) out += (l ? "," : "") + names[l] + ":" + digests[l];
   return out;
 }
 
-std::string BakeExemplars::digest() const {
-  if (images.size() == 1 && names.front().empty()) return exemplar_digest(images.front());
-  std::string out;
-  for (std::size_t l = 0; l < images.size(); ++l) out += (l ? "," : "") + names[l] + ":" + exemplar_digest(images[l]);
-  return out;
+}  // namespace
+
+std::string BakeExemplars::feature_digest() const { return joined(names, feature_digests); }
+
+std::string BakeExemplars::digest() const { return joined(names, digests); }
+
+std::size_t BakeExemplars::bytes() const {
+  std::size_t n = 0;
+  for (const RasterExemplar& r : raster) n += r.bytes();
+  return n;
 }
 
 BakeExemplars load_bake_exemplars(const BakeOptions& o) {
   BakeExemplars e;
-  if (o.layers.empty()) {
-    e.names.push_back("");
-    e.images.push_back(load_exemplar(o.exemplar_color, o.exemplar_feature, o.exemplar_displacement));
-  } else {
-    for (const ExemplarLayer& layer : o.layers) {
-      e.names.push_back(layer.name);
-      e.images.push_back(load_exemplar(layer.color, layer.feature, layer.displacement));
+  const auto add = [&](const std::string& name, const ExemplarLayer& files) {
+    const std::vector<Exemplar> frames = load_exemplar_frames(files.color, files.feature, files.displacement);
+    std::vector<std::string> feature, all;
+    for (const Exemplar& f : frames) {
+      feature.push_back(exemplar_feature_digest(f.feature));
+      all.push_back(exemplar_digest(f));
     }
-  }
-  for (const Exemplar& image : e.images) e.raster.push_back(prepare_raster_exemplar(image, o.raster.epsilon));
+    e.names.push_back(name);
+    e.feature_digests.push_back(sequence_digest(feature));
+    e.digests.push_back(sequence_digest(all));
+    e.raster.push_back(prepare_raster_exemplar(frames, o.raster.epsilon));
+  };
+  if (o.layers.empty())
+    add("", ExemplarLayer{"", o.exemplar_color, o.exemplar_feature, o.exemplar_displacement});
+  else
+    for (const ExemplarLayer& layer : o.layers) add(layer.name, layer);
   return e;
 }
 

@@ -316,6 +316,31 @@ std::vector<BakeOption> make_table() {
     o.absent = "6";
     o.example = "3";
   }
+  {
+    BakeOption& o = in(t.number("exemplar-fps", [](BakeOptions& b) -> auto& { return b.exemplar_fps; }),
+                       S::Exemplar, E::Animation,
+                       "An animated exemplar's (an image sequence's) frames per second; 0 plays one exemplar frame "
+                       "a bake frame. Each patch plays it from its birth with a phase of its own");
+    o.unit = "1/s";
+    o.range = {0, 10000};
+    o.manifest_key = "settings/exemplar_fps";
+    o.absent = "0";
+    o.example = "12";
+  }
+  {
+    const Field<ExemplarLoop> f = [](BakeOptions& b) -> auto& { return b.exemplar_loop; };
+    BakeOption& o = in(t.choice<ExemplarLoop>("exemplar-loop", f,
+                                              {{"loop", ExemplarLoop::Loop},
+                                               {"ping-pong", ExemplarLoop::PingPong},
+                                               {"hold", ExemplarLoop::Hold}}),
+                       S::Exemplar, E::Animation,
+                       "What an animated exemplar plays past its last frame: loop (from the first again), "
+                       "ping-pong (backwards, then forwards) or hold (the last frame; every patch starts at the "
+                       "first, so the frame is the patch's age)");
+    o.manifest_key = "settings/exemplar_loop";
+    o.absent = "loop";
+    o.example = "ping-pong";
+  }
 
   // Output
   {

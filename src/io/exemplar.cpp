@@ -9,6 +9,7 @@
 
 #include "lapflow/core/errors.hpp"
 #include "lapflow/io/image.hpp"
+#include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow {
 namespace {
@@ -97,6 +98,62 @@ Exemplar load_exemplar(const std::string& color_path, const std::string& feature
     ex.displacement = fit_to(disp, ex.color, displacement_path, color_path, "displacement map");
   }
   return ex;
+}
+
+bool is_exemplar_sequence(const std::string& path) {
+  std::error_code ec;
+  if (path.empty() || std::filesystem::is_regular_file(path, ec)) return false;
+  try {
+    return FramePattern(path).has_frame_token();
+  } catch (const UsageError&) {
+    return false;
+  }
+}
+
+std::string exemplar_first_frame(const std::string& path) {
+  if (!is_exemplar_sequence(path)) return path;
+  const FramePattern pattern(path);
+  const std::vector<int> frames = pattern.frames_on_disk();
+  return frames.empty() ? path : pattern.path(frames.front());
+}
+
+std::vector<Exemplar> load_exemplar_frames(const std::string& color_path, const std::string& feature_path,
+                                           const std::string& displacement_path) {
+  if (!is_exemplar_sequence(color_path)) return {load_exemplar(color_path, feature_path, displacement_path)};
+  const FramePattern color(color_path);
+  const std::vector<int> frames = color.frames_on_disk();
+  if (frames.empty()) throw InputError(color_path, "no frame of this exemplar sequence is on disk");
+  if (frames.size() > kMaxExemplarFrames)
+    throw InputError(color_path, fmt::format("{} frames; an animated exemplar has at most {}", frames.size(),
+                                             kMaxExemplarFrames));
+  for (std::size_t i = 1; i < frames.size(); ++i)
+    if (frames[i] != frames[0] + int(i))
+      throw InputError(color.path(frames[0] + int(i)),
+                       fmt::format("missing: the exemplar sequence has frames {} to {} with gaps", frames.front(),
+                                   frames.back()));
+  // A feature or displacement map that is one image serves every frame.
+  const auto frame_file = [](const std::string& path, int f) {
+    return is_exemplar_sequence(path) ? FramePattern(path).path(f) : path;
+  };
+  std::vector<Exemplar> out;
+  out.reserve(frames.size());
+  for (int f : frames) {
+    for (const std::string* side : {&feature_path, &displacement_path}) {
+      std::error_code ec;
+      const std::string file = frame_file(*side, f);
+      if (!side->empty() && !std::filesystem::is_regular_file(file, ec))
+        throw InputError(file, fmt::format("missing: the colour sequence {} has frame {}", color_path, f));
+    }
+    out.push_back(load_exemplar(color.path(f), frame_file(feature_path, f), frame_file(displacement_path, f)));
+    const Image& first = out.front().color;
+    const Image& now = out.back().color;
+    if (now.width != first.width || now.height != first.height)
+      throw InputError(color.path(f), fmt::format("{}x{}: the sequence's first frame ({}) is {}x{}; every frame of an "
+                                                  "animated exemplar has one size",
+                                                  now.width, now.height, color.path(frames.front()), first.width,
+                                                  first.height));
+  }
+  return out;
 }
 
 }  // namespace lapflow

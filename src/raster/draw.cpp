@@ -68,7 +68,7 @@ inline const uint64_t* rest_ground(const RasterContext& ctx, std::size_t p) {
 // The slack covers the texels' barycentrics (kInsideTol outside the
 // triangle) and the bilinear weights' rounding.
 uint8_t sure_passes(const RasterContext& ctx, const LayerMaps& layer, const Vec2 uv[3], const float w[3], double slope) {
-  if (ctx.mode != RasterMode::Erosion || layer.erosion_min.empty()) return 0;
+  if (ctx.mode != RasterMode::Erosion || !layer.erosion_min) return 0;
   constexpr double kUvSlack = 1e-7, kWSlack = 1e-6, kFScale = 1 - 1e-5;
   const double ua = std::min({uv[0].x, uv[1].x, uv[2].x}) - kUvSlack, ub = std::max({uv[0].x, uv[1].x, uv[2].x}) + kUvSlack;
   const double va = std::min({uv[0].y, uv[1].y, uv[2].y}) - kUvSlack, vb = std::max({uv[0].y, uv[1].y, uv[2].y}) + kUvSlack;
@@ -89,13 +89,13 @@ uint8_t sure_passes(const RasterContext& ctx, const LayerMaps& layer, const Vec2
   uint8_t sure = 0;
   {
     const ErosionMap& map = layer.erosion();
-    const double f = f_min(layer.erosion_min, map.feature);
+    const double f = f_min(*layer.erosion_min, map.feature);
     if (f >= 0 && std::sqrt(f + std::max(0.0, D_min)) * map.inv_max - map.epsilon >= 1.0 - w_min) sure |= kSureKeeps;
   }
-  if (ctx.hold && !layer.held_min.empty()) {
-    const ErosionMap& held = layer.held_erosion;
+  if (ctx.hold && layer.held) {
+    const ErosionMap& held = layer.held_erosion();
     const double r = ctx.held_reach;
-    const double f = f_min(layer.held_min, held.feature);
+    const double f = f_min(layer.held->min, held.feature);
     const double D = std::min(1.0, std::max(0.0, D_min) + 2 * r);
     if (f >= 0 && std::sqrt(f + D) * held.inv_max - held.epsilon >= 1.0 - std::min(1.0, w_min + slope * r) - ctx.options.hold_margin)
       sure |= kSureHeld;
@@ -135,7 +135,7 @@ inline bool passes(const RasterContext& ctx, const Patch& patch, const LayerMaps
   if (ctx.hold && held_at(patch.held, u, v)) {
     if (sure & kSureHeld) return true;
     const double r = ctx.held_reach;
-    return keeps_held(layer.held_erosion, r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
+    return keeps_held(layer.held_erosion(), r, ctx.options.hold_margin, u, v, std::min(1.0, w + slope * r));
   }
   if (!(sure & kSureKeeps) && !keeps(erosion, u, v, w, ctx.mode)) return false;
   return !ground || held_at(ground, u, v) || !interior_texel(ctx, std::size_t(idx), x, y);
@@ -196,7 +196,7 @@ bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t,
   const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
   const float wv[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
   const double r = ctx.held_reach;
-  return keeps_held(ctx.layer_of(patch).held_erosion, r, ctx.options.hold_margin, u, v,
+  return keeps_held(ctx.layer_of(patch).held_erosion(), r, ctx.options.hold_margin, u, v,
                     std::min(1.0, w + weight_slope(uv, wv) * r));
 }
 
@@ -778,9 +778,9 @@ void draw_patches(RasterBuffers& r, const PatchSet& patches) {
   const std::size_t np = patches.patches.size();
   if (np >= (std::size_t(1) << 32) - 1) throw std::invalid_argument("rasterize: too many patches");
   for (const Patch& patch : patches.patches)
-    if (patch.layer >= ctx.layers.size())
+    if (patch.layer >= ctx.layer_first.size())
       throw std::invalid_argument("rasterize: patch " + std::to_string(patch.id) + " has layer " +
-                                  std::to_string(patch.layer) + " of " + std::to_string(ctx.layers.size()));
+                                  std::to_string(patch.layer) + " of " + std::to_string(ctx.layer_first.size()));
   if (ctx.mode == RasterMode::Blend) ctx.blend.contributed.assign(np, 0);
   bind_rest_ground(ctx, patches);
   // Every patch triangle, any order (the atomic min decides).

@@ -74,7 +74,47 @@ RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon)
   RasterExemplar r;
   r.mips = build_exemplar_mips(exemplar);
   r.erosion = build_erosion_map(exemplar.feature, epsilon);
+  r.tables = std::make_shared<ExemplarTables>();
   return r;
+}
+
+RasterExemplar prepare_raster_exemplar(std::span<const Exemplar> frames, double epsilon) {
+  if (frames.empty()) throw std::invalid_argument("prepare_raster_exemplar: no frames");
+  RasterExemplar r = prepare_raster_exemplar(frames[0], epsilon);
+  r.later.resize(frames.size() - 1);
+  parallel_for(
+      r.later.size(),
+      [&](std::size_t b, std::size_t e) {
+        for (std::size_t k = b; k < e; ++k) r.later[k] = prepare_raster_exemplar(frames[k + 1], epsilon);
+      },
+      1);
+  return r;
+}
+
+std::size_t RasterExemplar::bytes() const {
+  std::size_t n = erosion.feature.pixels.size() * sizeof(float);
+  for (const Image& level : mips.levels) n += level.pixels.size() * sizeof(float);
+  for (const RasterExemplar& f : later) n += f.bytes();
+  return n;
+}
+
+int ExemplarClock::frame_of(const Patch& patch, int count) const {
+  if (count <= 1) return 0;
+  const double age = double(frame) - double(patch.birth_frame);
+  const double phase = loop == ExemplarLoop::Hold ? 0.0 : hash_to_unit(hash64(seed, patch.id, 0x65786c70)) * count;
+  const double t = std::floor(std::max(0.0, age) * rate + phase);
+  switch (loop) {
+    case ExemplarLoop::Hold:
+      return int(std::min(t, double(count - 1)));
+    case ExemplarLoop::PingPong: {
+      const double period = 2.0 * (count - 1);
+      const int m = int(t - period * std::floor(t / period));
+      return m < count ? m : int(period) - m;
+    }
+    case ExemplarLoop::Loop:
+      break;
+  }
+  return int(t - count * std::floor(t / count));
 }
 
 namespace detail {

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "lapflow/raster/raster.hpp"
@@ -77,19 +79,45 @@ struct TrianglePixelMap {
   bool ok = false;               // not degenerate
 };
 
-/// What the raster reads of one exemplar layer (Patch::layer): its mips and
-/// erosion map, and the tables built from them for this atlas.
+/// The held test's feature map for one window (RasterContext::held_reach
+/// in exemplar pixels) and its minima.
+struct HeldTables {
+  int kx = -1, ky = -1;
+  ErosionMap erosion;
+  MinPyramid min;
+};
+
+/// What the raster derives from one exemplar frame's feature map, built on
+/// first use and kept with the RasterExemplar: the bake's frames, and its
+/// two passes, share them. The held tables of the last window asked for
+/// are kept (the window changes only when the atlas's texel size crosses a
+/// pixel of the exemplar).
+}  // namespace lapflow::detail
+
+struct lapflow::ExemplarTables {
+  std::mutex mutex;
+  std::shared_ptr<const detail::MinPyramid> erosion_min;
+  std::shared_ptr<const detail::HeldTables> held;
+};
+
+namespace lapflow::detail {
+
+/// What the raster reads of one exemplar layer (Patch::layer) and, for an
+/// animated one, one of its frames: its mips and erosion map, and the
+/// tables built from them for this atlas.
 struct LayerMaps {
   const RasterExemplar* exemplar = nullptr;
   /// RasterOptions::hold (Erosion mode): the held test's feature map (the
-  /// maximum within RasterContext::held_reach in uv: one atlas texel).
-  ErosionMap held_erosion;
-  /// Minima of exemplar->erosion.feature and held_erosion.feature (Erosion
-  /// mode): a patch triangle whose every texel passes the test is known
-  /// before its pixels are visited (draw.cpp, sure_passes).
-  MinPyramid erosion_min, held_min;
+  /// maximum within RasterContext::held_reach in uv: one atlas texel) and
+  /// its minima.
+  std::shared_ptr<const HeldTables> held;
+  /// Minima of exemplar->erosion.feature (Erosion mode): a patch triangle
+  /// whose every texel passes the test is known before its pixels are
+  /// visited (draw.cpp, sure_passes).
+  std::shared_ptr<const MinPyramid> erosion_min;
   double lod = 0;  ///< the exemplar's level of detail on this atlas
   const ErosionMap& erosion() const { return exemplar->erosion; }
+  const ErosionMap& held_erosion() const { return held->erosion; }
 };
 
 struct RasterContext {
@@ -98,9 +126,15 @@ struct RasterContext {
   RasterMode mode;
   double delta_max;
   RasterOptions options;
-  /// One per exemplar layer, indexed by Patch::layer (one in a bake of one exemplar).
+  /// One per exemplar layer and frame: layer l's frames from
+  /// layer_first[l] (one in a bake of one still exemplar).
   std::vector<LayerMaps> layers;
-  const LayerMaps& layer_of(const Patch& patch) const { return layers[patch.layer]; }
+  std::vector<uint32_t> layer_first, layer_frames;
+  /// The maps of the patch's layer at the exemplar frame it shows.
+  const LayerMaps& layer_of(const Patch& patch) const {
+    const uint32_t n = layer_frames[patch.layer];
+    return layers[layer_first[patch.layer] + (n > 1 ? uint32_t(options.clock.frame_of(patch, int(n))) : 0u)];
+  }
   TriangleLocator locate_fn;                ///< owned copy of the caller's locator (may be empty)
   const TriangleLocator* locate = nullptr;  ///< &locate_fn when it is set
   double radius = 0.1;  ///< r (metres)

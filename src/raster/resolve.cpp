@@ -30,7 +30,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
   // cores at once.
   const bool half = options.images && options.half_images;
   // patch_id, u, v, w, and with more than one exemplar layer the patch's layer.
-  const int aov_channels = ctx.layers.size() > 1 ? 5 : 4;
+  const int aov_channels = ctx.layer_first.size() > 1 ? 5 : 4;
   auto half_image = [&](int channels) {
     HalfImage h;
     h.width = N, h.height = N, h.channels = channels;

@@ -134,8 +134,11 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, Exemp
   r.context = std::make_shared<RasterContext>(mesh, atlas, options.mode, weights.delta_max);
   RasterContext& ctx = *r.context;
   ctx.options = options;
-  ctx.layers.resize(exemplars.size());
-  for (std::size_t l = 0; l < exemplars.size(); ++l) ctx.layers[l].exemplar = &exemplars[l];
+  for (const RasterExemplar& exemplar : exemplars) {
+    ctx.layer_first.push_back(uint32_t(ctx.layers.size()));
+    ctx.layer_frames.push_back(uint32_t(exemplar.frame_count()));
+    for (std::size_t k = 0; k < exemplar.frame_count(); ++k) ctx.layers.emplace_back().exemplar = &exemplar.frame(k);
+  }
   ctx.locate_fn = std::move(locate);
   ctx.locate = ctx.locate_fn ? &ctx.locate_fn : nullptr;
   ctx.radius = options.radius;
@@ -165,17 +168,33 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, Exemp
     const RasterExemplar& exemplar = *layer.exemplar;
     const Image& base = exemplar.mips.levels[0];
     const double px_per_texel = st.texel_world_size / (2 * options.radius) * std::max(base.width, base.height);
+    ExemplarTables own;
+    ExemplarTables& tables = exemplar.tables ? *exemplar.tables : own;
+    std::lock_guard lock(tables.mutex);
     if (ctx.hold) {
       // The window reaches a pixel further than the held reach so that the
       // bilinear lookup of the maximum bounds every lookup within the reach.
       const Image& F = exemplar.erosion.feature;
       const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
       const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
-      layer.held_erosion = exemplar.erosion;
-      layer.held_erosion.feature = max_filter(F, kx, ky);
-      layer.held_min.build(layer.held_erosion.feature);
+      if (!tables.held || tables.held->kx != kx || tables.held->ky != ky) {
+        auto held = std::make_shared<HeldTables>();
+        held->kx = kx, held->ky = ky;
+        held->erosion = exemplar.erosion;
+        held->erosion.feature = max_filter(F, kx, ky);
+        held->min.build(held->erosion.feature);
+        tables.held = std::move(held);
+      }
+      layer.held = tables.held;
     }
-    if (options.mode == RasterMode::Erosion) layer.erosion_min.build(exemplar.erosion.feature);
+    if (options.mode == RasterMode::Erosion) {
+      if (!tables.erosion_min) {
+        auto min = std::make_shared<MinPyramid>();
+        min->build(exemplar.erosion.feature);
+        tables.erosion_min = std::move(min);
+      }
+      layer.erosion_min = tables.erosion_min;
+    }
     layer.lod = options.mipmap && px_per_texel > 1 ? std::log2(px_per_texel) : 0;
   }
   st.lod = ctx.layers[0].lod;

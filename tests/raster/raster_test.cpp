@@ -915,7 +915,7 @@ TEST(Raster, SureErosionTestsHoldAtEveryPointOfTheirTriangle) {
         ASSERT_TRUE(detail::keeps(ctx.layers[0].erosion(), u, v, wt, ctx.mode)) << "triangle " << k << " point " << s;
       }
       if (sure & detail::kSureHeld) {
-        ASSERT_TRUE(detail::keeps_held(ctx.layers[0].held_erosion, ctx.held_reach, o.hold_margin, u, v,
+        ASSERT_TRUE(detail::keeps_held(ctx.layers[0].held_erosion(), ctx.held_reach, o.hold_margin, u, v,
                                        std::min(1.0, wt + slope * ctx.held_reach)))
             << "triangle " << k << " point " << s;
       }

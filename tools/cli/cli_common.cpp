@@ -6,10 +6,12 @@
 
 #include <filesystem>
 #include <regex>
+#include <set>
 
 #include "lapflow/core/errors.hpp"
 #include "lapflow/core/memory.hpp"
 #include "lapflow/core/parallel.hpp"
+#include "lapflow/io/image.hpp"
 #include "lapflow/io/mesh_io.hpp"
 
 namespace lapflow::cli {
@@ -114,15 +116,69 @@ std::string find_sibling(const fs::path& dir, const std::string& stem) {
   }
   return "";
 }
+
+// An animated exemplar's folder: its NAME.color.NNNN.EXT frames as a pattern.
+std::string sequence_in_folder(const fs::path& dir) {
+  static const std::regex frame(R"((.+)\.color\.(\d+)\.(png|exr|tif|tiff|jpg|jpeg))", std::regex::icase);
+  std::string name, ext;
+  std::set<std::size_t> widths;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string file = it->path().filename().string();
+    std::smatch m;
+    if (!std::regex_match(file, m, frame)) continue;
+    if (!name.empty() && (m[1].str() != name || m[3].str() != ext))
+      throw InputError(dir.string(), "holds two exemplar sequences (" + name + ".color.*." + ext + " and " +
+                                         m[1].str() + ".color.*." + m[3].str() + "); name one with a frame pattern");
+    name = m[1].str(), ext = m[3].str();
+    widths.insert(m[2].length());
+  }
+  if (name.empty())
+    throw InputError(dir.string(), "a folder, but no animated exemplar's frames NAME.color.0001.png in it");
+  const std::string token = widths.size() == 1 ? "%0" + std::to_string(*widths.begin()) + "d" : "%d";
+  return (dir / (name + ".color." + token + "." + ext)).string();
+}
+
+// NAME.color.%04d.png -> NAME.KIND.%04d.EXT beside it, when its frames are on disk.
+std::string sibling_sequence(const std::string& color, const std::string& kind) {
+  const fs::path path(color);
+  const std::string file = path.filename().string();
+  const std::size_t at = file.find(".color.");
+  if (at == std::string::npos) return "";
+  const std::string rest = file.substr(at + 7);
+  const std::size_t dot = rest.rfind('.');
+  for (const char* ext : {".png", ".exr", ".tif", ".tiff", ".jpg", ".jpeg"}) {
+    const std::string candidate =
+        (path.parent_path() / (file.substr(0, at) + "." + kind + "." + rest.substr(0, dot) + ext)).string();
+    if (!FramePattern(candidate).frames_on_disk().empty()) return candidate;
+  }
+  return "";
+}
+
 }  // namespace
 
 void resolve_exemplar_paths(std::string& color, std::string& feature, std::string& displacement) {
   if (color.empty()) throw UsageError("--exemplar is required (a colour image or a shipped exemplar's name)");
   if (!fs::exists(color) && color.find('/') == std::string::npos && color.find('.') == std::string::npos) {
-    const std::string shipped = find_sibling(exemplar_dir(), color + ".color");
+    std::string shipped = find_sibling(exemplar_dir(), color + ".color");
+    if (shipped.empty() && fs::is_directory(fs::path(exemplar_dir()) / color))
+      shipped = (fs::path(exemplar_dir()) / color).string();
     if (shipped.empty())
       throw InputError(color, "no such file, and no shipped exemplar of that name in " + exemplar_dir());
     color = shipped;
+  }
+  if (fs::is_directory(color)) color = sequence_in_folder(color);
+  if (is_exemplar_sequence(color)) {
+    if (FramePattern(color).frames_on_disk().empty())
+      throw InputError(color, "no frame of this animated exemplar is on disk");
+    if (feature.empty()) {
+      feature = sibling_sequence(color, "feature");
+      if (feature.empty())
+        throw InputError(color, "no feature map given (--feature) and no NAME.feature.NNNN frames beside this "
+                                "animated exemplar's NAME.color.NNNN frames");
+    }
+    if (displacement.empty()) displacement = sibling_sequence(color, "disp");
+    return;
   }
   if (!fs::exists(color)) throw InputError(color, "exemplar image not found");
   // NAME.color.EXT -> NAME; otherwise the file's stem.

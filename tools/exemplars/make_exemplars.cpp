@@ -264,6 +264,36 @@ void ripples(double x, double y, Rgb& c, double& f, double& d) {
   c = mix(deep, shallow, 0.35 + 0.5 * swell) + Rgb{0.32, 0.38, 0.36} * (line * line);
 }
 
+// Boil: an animated exemplar (docs/layers.md), a green slime whose bubbles
+// swell and sink back, each cell on a phase of its own; `t` in [0,1) is the
+// loop's time, and every term is periodic in it so the sequence loops
+// seamlessly. Feature: the bubble's dome (erosion cuts between bubbles).
+void boil(double x, double y, double t, Rgb& c, double& f, double& d) {
+  const double a = 2 * kPi * t;
+  const double slime = 0.5 + 0.5 * fbm(x + 0.03 * std::cos(a), y + 0.03 * std::sin(a), 4, 4, 71);
+  // Sites jittered by at most 0.25 lie 0.5 cells apart or more: a bubble of
+  // radius 0.25 never reaches past its cell's border.
+  const Cell cell = voronoi(x, y, 7, 72, 0.5);
+  const double phase = hash_to_unit(hash64(cell.id, 73));
+  const double u = t + phase - std::floor(t + phase);
+  const double size = 0.25 * std::pow(std::sin(kPi * u), 0.6);
+  const double r = size > 1e-3 ? cell.centre / size : 2.0;
+  const double dome = r < 1 ? std::sqrt(1 - r * r) : 0.0;
+  f = dome;
+  d = std::clamp(0.25 + 0.25 * slime + 0.5 * dome, 0.0, 1.0);
+  const Rgb dark{0.10, 0.22, 0.05}, light{0.35, 0.62, 0.16};
+  c = mix(dark, light, 0.3 + 0.5 * slime);
+  if (dome > 0) {
+    const double rim = smoothstep(0.75, 1.0, r);
+    c = mix(mix(light, Rgb{0.62, 0.86, 0.35}, dome), dark, 0.6 * rim);
+    const double hx = (x * 6 - std::floor(x * 6)) - 0.5, hy = (y * 6 - std::floor(y * 6)) - 0.5;
+    c = c + Rgb{0.3, 0.3, 0.25} * (dome * smoothstep(0.6, 1.0, dome) * (0.5 + 0.5 * (hy - hx)));
+  }
+}
+
+/// The animated exemplar's frames, one loop.
+constexpr int kBoilFrames = 12;
+
 struct Exemplar {
   const char* name;
   void (*shade)(double, double, Rgb&, double&, double&);
@@ -329,6 +359,21 @@ int main(int argc, char** argv) {
                   p == 0 ? (v <= 0.0031308f ? v * 12.92f : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f) : v;
             }
     }
+    // The animated exemplar, at half the size: boil/boil.{color,feature,disp}.NNNN.png.
+    const int anim = size / 2;
+    const std::filesystem::path folder = std::filesystem::path(out) / "boil";
+    std::filesystem::create_directories(folder);
+    for (int k = 0; k < kBoilFrames; ++k) {
+      const double t = double(k) / kBoilFrames;
+      const Maps m = draw(anim, [t](double x, double y, Rgb& c, double& f, double& d) { boil(x, y, t, c, f, d); });
+      const std::string base = (folder / "boil").string();
+      const std::string number = fmt::format("{:04d}", k + 1);
+      lapflow::write_png(base + ".color." + number + ".png", m.color, true, 8);
+      lapflow::write_png(base + ".feature." + number + ".png", m.feature, false, 16);
+      lapflow::write_png(base + ".disp." + number + ".png", m.disp, false, 16);
+    }
+    fmt::print("boil: {} frames of {}x{}  animated green slime whose bubbles swell and sink, each on its own phase\n",
+               kBoilFrames, anim, anim);
     // Grey maps are data, shown as stored; the colour column is encoded above.
     if (!contact.empty()) lapflow::write_png(contact, sheet, false, 8);
   } catch (const std::exception& e) {

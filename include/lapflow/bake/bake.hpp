@@ -47,6 +47,11 @@ struct BakeOptions {
   /// another layer before the patch is retired, so that the new layer's
   /// patches take the place (docs/layers.md, "Changing regions").
   int layer_switch = 6;
+  /// An animated exemplar's rate in frames per second (0: one exemplar
+  /// frame a bake frame) and what it plays past its last frame
+  /// (docs/layers.md, "Animated exemplars").
+  double exemplar_fps = 0;
+  ExemplarLoop exemplar_loop = ExemplarLoop::Loop;
   // Outputs
   std::string out_dir;
   std::string name = "lapflow";

@@ -23,11 +23,14 @@ struct BakeInputSizes {
   /// sequence whose surface grows needs more per frame than the first.
   double growth = 1;
   ImageHeader color, feature, displacement;  ///< displacement.width = 0 when there is none
+  /// An animated exemplar's frames (the headers are its first frame's).
+  std::size_t frames = 1;
   /// With exemplar layers (BakeOptions::layers), the above are the first
   /// layer's and these every layer's, in order.
   struct Layer {
     std::string color_path, feature_path, displacement_path;
     ImageHeader color, feature, displacement;
+    std::size_t frames = 1;
   };
   std::vector<Layer> layers;
 };

@@ -97,17 +97,22 @@ class LayerField {
 };
 
 /// A bake's exemplars, one per layer (one without --layer), loaded and
-/// prepared for the raster.
+/// prepared for the raster. An animated exemplar's frames are prepared once
+/// each (RasterExemplar::later); the loaded images are not kept.
 struct BakeExemplars {
   std::vector<std::string> names;  ///< the layers' names (empty names for a bake of one exemplar)
-  std::vector<Exemplar> images;
   std::vector<RasterExemplar> raster;
+  /// Per layer: exemplar_feature_digest and exemplar_digest of its frames
+  /// (one frame's alone; an animated exemplar's chained, "CRC/FRAMES").
+  std::vector<std::string> feature_digests, digests;
   ExemplarLayers layers() const { return raster; }
   /// exemplar_feature_digest of each layer: one layer's alone, else
   /// "NAME:DIGEST" joined by ',' (the names and order are part of the tracking).
   std::string feature_digest() const;
   /// exemplar_digest of each layer, joined the same way.
   std::string digest() const;
+  /// Bytes of every layer's prepared frames (RasterExemplar::bytes).
+  std::size_t bytes() const;
 };
 
 /// Loads the exemplar of every layer (BakeOptions::layers, else the

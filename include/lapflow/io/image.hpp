@@ -165,4 +165,23 @@ struct Exemplar {
 Exemplar load_exemplar(const std::string& color_path, const std::string& feature_path,
                        const std::string& displacement_path = "");
 
+/// The most frames an animated exemplar may have.
+inline constexpr std::size_t kMaxExemplarFrames = 1000;
+
+/// True when `path` names an animated exemplar: a frame pattern
+/// (`lava.color.%04d.png`, `lava.color.####.png`, `$F4`) that is not itself
+/// a file.
+bool is_exemplar_sequence(const std::string& path);
+/// The file of an animated exemplar's first frame on disk (`path` itself
+/// for one image, or when no frame is on disk).
+std::string exemplar_first_frame(const std::string& path);
+
+/// An animated exemplar's frames (docs/layers.md, "Animated exemplars"), or
+/// the one frame of a still one. `color_path` is a frame pattern whose
+/// frames on disk run without a gap; a feature or displacement path is a
+/// pattern with the same frames, or one image for every frame. Every frame
+/// has the first one's size. Throws InputError naming the file.
+std::vector<Exemplar> load_exemplar_frames(const std::string& color_path, const std::string& feature_path,
+                                           const std::string& displacement_path = "");
+
 }  // namespace lapflow

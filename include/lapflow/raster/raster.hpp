@@ -24,6 +24,28 @@
 
 namespace lapflow {
 
+/// How an animated exemplar plays past its last frame (docs/layers.md).
+enum class ExemplarLoop : uint8_t {
+  Loop,      ///< back to the first frame
+  PingPong,  ///< backwards to the first, then forwards again
+  Hold,      ///< stays on the last frame
+};
+
+/// Which frame of an animated exemplar a patch shows (docs/layers.md,
+/// "Animated exemplars"): a patch plays the sequence from its birth, at
+/// `rate` exemplar frames a bake frame, from a phase of its own (a hash of
+/// the seed and its id) so that neighbours do not pulse in step. In Hold
+/// mode there is no phase: the frame is the patch's age, so every patch
+/// starts at the first frame and stays on the last.
+struct ExemplarClock {
+  int frame = 0;     ///< the bake frame drawn
+  double rate = 1;   ///< exemplar frames per bake frame (--exemplar-fps / --fps)
+  ExemplarLoop loop = ExemplarLoop::Loop;
+  uint64_t seed = 1; ///< the bake's seed
+  /// The frame in [0, count) `patch` shows at `frame`; 0 when count <= 1.
+  int frame_of(const Patch& patch, int count) const;
+};
+
 /// How patches compose into a texel.
 enum class RasterMode {
   Erosion,  ///< the paper (2021): oldest non-eroded patch wins, no blending
@@ -96,6 +118,8 @@ struct RasterOptions {
   /// of them, so they take them over on the next frame. 0 = off (the paper
   /// retires only patches that won nothing). docs/temporal.md.
   double merge = 0.1;
+  /// The bake frame, for animated exemplars (unused with still ones).
+  ExemplarClock clock;
   /// The paper's erosion, hole filling and retirement (2021) as published:
   /// every hole gets a new patch, no hysteresis, only patches that won
   /// nothing retire. For comparisons (`--paper`); the defaults above bound
@@ -129,10 +153,26 @@ struct ErosionMap {
   double epsilon = 0.1;
 };
 
+/// Tables the raster derives from one exemplar frame's feature map (its
+/// minima, and the held test's maxima per window; raster/internal.hpp),
+/// built on first use and kept across the bake's frames.
+struct ExemplarTables;
+
 /// What the rasterizer needs from the exemplar, built once per bake.
 struct RasterExemplar {
   ExemplarMips mips;
   ErosionMap erosion;
+  /// An animated exemplar's frames after this, the first (docs/layers.md),
+  /// each prepared once; empty for a still exemplar.
+  std::vector<RasterExemplar> later;
+  /// Shared by copies; set by prepare_raster_exemplar (a frame without
+  /// one gets tables of its own for each raster pass).
+  std::shared_ptr<ExemplarTables> tables;
+
+  std::size_t frame_count() const { return 1 + later.size(); }
+  const RasterExemplar& frame(std::size_t k) const { return k == 0 ? *this : later[k - 1]; }
+  /// Bytes held by the mips and erosion map of every frame (not the tables).
+  std::size_t bytes() const;
 };
 
 /// The exemplars of a bake's layers, indexed by Patch::layer: one in a bake
@@ -143,6 +183,8 @@ inline constexpr std::size_t kMaxLayers = 16;
 
 /// Builds the mip pyramid and the erosion map. `epsilon` is RasterOptions::epsilon.
 RasterExemplar prepare_raster_exemplar(const Exemplar& exemplar, double epsilon);
+/// The same for an animated exemplar's frames (at least one), all of one size.
+RasterExemplar prepare_raster_exemplar(std::span<const Exemplar> frames, double epsilon);
 ExemplarMips build_exemplar_mips(const Exemplar& exemplar);
 ErosionMap build_erosion_map(const Image& feature, double epsilon);
 
