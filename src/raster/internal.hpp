@@ -89,15 +89,16 @@ struct HeldTables {
 
 /// What the raster derives from one exemplar frame's feature map, built on
 /// first use and kept with the RasterExemplar: the bake's frames, and its
-/// two passes, share them. The held tables of the last window asked for
-/// are kept (the window changes only when the atlas's texel size crosses a
-/// pixel of the exemplar).
+/// two passes, share them. The held tables of the last two windows asked
+/// for are kept, one for each pass's atlas (a window changes only when that
+/// atlas's texel size crosses a pixel of the exemplar).
 }  // namespace lapflow::detail
 
 struct lapflow::ExemplarTables {
   std::mutex mutex;
   std::shared_ptr<const detail::MinPyramid> erosion_min;
-  std::shared_ptr<const detail::HeldTables> held;
+  std::shared_ptr<const detail::HeldTables> held[2];
+  int last_used = 0;  ///< which of `held` was asked for last
 };
 
 namespace lapflow::detail {

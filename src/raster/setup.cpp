@@ -177,15 +177,19 @@ RasterBuffers begin_raster(const TriMesh& mesh, const SurfaceAtlas& atlas, Exemp
       const Image& F = exemplar.erosion.feature;
       const int kx = std::min(F.width, int(std::ceil(ctx.held_reach * F.width)) + 1);
       const int ky = std::min(F.height, int(std::ceil(ctx.held_reach * F.height)) + 1);
-      if (!tables.held || tables.held->kx != kx || tables.held->ky != ky) {
+      const auto fits = [&](int k) { return tables.held[k] && tables.held[k]->kx == kx && tables.held[k]->ky == ky; };
+      int slot = fits(0) ? 0 : fits(1) ? 1 : -1;
+      if (slot < 0) {
+        slot = 1 - tables.last_used;  // the one asked for longer ago
         auto held = std::make_shared<HeldTables>();
         held->kx = kx, held->ky = ky;
         held->erosion = exemplar.erosion;
         held->erosion.feature = max_filter(F, kx, ky);
         held->min.build(held->erosion.feature);
-        tables.held = std::move(held);
+        tables.held[slot] = std::move(held);
       }
-      layer.held = tables.held;
+      tables.last_used = slot;
+      layer.held = tables.held[slot];
     }
     if (options.mode == RasterMode::Erosion) {
       if (!tables.erosion_min) {

@@ -109,3 +109,38 @@ TEST(LayersScenes, TheShippedLayeredSceneFilesHoldValidLayersAndRules) {
 }
 
 }  // namespace
+
+TEST_F(LayersCli, TheShippedAnimatedExemplarByNameAFolderOrAPatternAndItsPlayback) {
+  std::string err;
+  ASSERT_EQ(bake("--exemplar boil --exemplar-fps 12 --exemplar-loop ping-pong --out '" + (dir_ / "out") + "'", &err), 0)
+      << err;
+  const BakeManifest m = read_bake_manifest(dir_ / "out");
+  EXPECT_EQ(fs::path(m.options.exemplar_color).filename(), "boil.color.%04d.png");
+  EXPECT_EQ(fs::path(m.options.exemplar_feature).filename(), "boil.feature.%04d.png") << "beside the colour frames";
+  EXPECT_EQ(fs::path(m.options.exemplar_displacement).filename(), "boil.disp.%04d.png");
+  EXPECT_EQ(m.options.exemplar_fps, 12);
+  EXPECT_EQ(m.options.exemplar_loop, ExemplarLoop::PingPong);
+  EXPECT_NE(m.feature_digest.find("/12"), std::string::npos) << "12 frames: " << m.feature_digest;
+
+  // A folder, and a layer of it beside a still one.
+  const std::string folder = std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/boil";
+  ASSERT_EQ(bake("--layer hot=" + folder + " --layer calm=ripples --where 'hot:heat > 0.5' --out '" +
+                     (dir_ / "layered") + "'",
+                 &err),
+            0)
+      << err;
+  EXPECT_EQ(fs::path(read_bake_manifest(dir_ / "layered").options.layers[0].color).filename(), "boil.color.%04d.png");
+}
+
+TEST_F(LayersCli, AnimatedExemplarMistakesAreExit2NamingTheFile) {
+  std::string err;
+  fs::create_directories(dir_ / "empty");
+  EXPECT_EQ(bake("--exemplar '" + (dir_ / "empty") + "' --out '" + (dir_ / "o1") + "'", &err), 2);
+  EXPECT_NE(err.find(dir_ / "empty"), std::string::npos) << err;
+  EXPECT_NE(err.find("NAME.color.0001.png"), std::string::npos) << err;
+  EXPECT_EQ(bake("--exemplar '" + (dir_ / "none.color.%04d.png") + "' --out '" + (dir_ / "o2") + "'", &err), 2);
+  EXPECT_NE(err.find("none.color.%04d.png"), std::string::npos) << err;
+  EXPECT_EQ(bake("--exemplar boil --exemplar-loop bounce --out '" + (dir_ / "o3") + "'", &err), 2);
+  EXPECT_NE(err.find("--exemplar-loop"), std::string::npos) << err;
+  EXPECT_NE(err.find("ping-pong"), std::string::npos) << err;
+}
