@@ -22,6 +22,7 @@
 
 #include "lapflow/surface/mesh.hpp"
 #include "lapflow/bake/bake.hpp"
+#include "lapflow/bake/layers.hpp"
 #include "lapflow/core/errors.hpp"
 #include "test_helpers.hpp"
 
@@ -169,6 +170,16 @@ inline void bake_lava_demo(const TempDir& dir, int frames, const std::string& op
 
 /// A 1 m x 1 m plane flowing along +y at 0.2 m/s, with a vertex property
 /// `heat` = heat(x, frame), as ASCII PLY frames m.0001.ply, ...
+/// A shipped exemplar's file: `exemplars/NAME.KIND.png` (KIND color, feature or disp).
+inline std::string shipped(const std::string& name, const std::string& kind) {
+  return std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/" + name + "." + kind + ".png";
+}
+
+/// Layer `layer` of shipped exemplar `exemplar`'s three files.
+inline ExemplarLayer shipped_layer(const std::string& layer, const std::string& exemplar) {
+  return {layer, shipped(exemplar, "color"), shipped(exemplar, "feature"), shipped(exemplar, "disp")};
+}
+
 inline void write_heat_plane(const std::string& dir, int frames, const std::function<double(double, int)>& heat) {
   const TriMesh m = plane_grid(48, 48, 1.0, 1.0);
   for (int f = 1; f <= frames; ++f) {

@@ -18,6 +18,23 @@ namespace lapflow {
 
 namespace {
 
+// A repeatable option's text: ';' separates several values, each replaces
+// the one of its name in `list` or comes last; an empty text clears it.
+template <class T, class Parse, class Name>
+void set_named(std::vector<T>& list, const std::string& text, Parse parse, Name name_of) {
+  if (text.empty()) list.clear();
+  for (std::size_t at = 0; at < text.size();) {
+    const std::size_t end = std::min(text.find(';', at), text.size());
+    T item = parse(text.substr(at, end - at));
+    auto same = std::find_if(list.begin(), list.end(), [&](const T& x) { return name_of(x) == name_of(item); });
+    if (same != list.end())
+      *same = std::move(item);
+    else
+      list.push_back(std::move(item));
+    at = end + 1;
+  }
+}
+
 template <class T>
 using Field = T& (*)(BakeOptions&);
 
@@ -258,20 +275,9 @@ std::vector<BakeOption> make_table() {
       for (const ExemplarLayer& l : b.layers) text += (text.empty() ? "" : ";") + layer_text(l);
       return text;
     };
-    // Each layer replaces the one of its name (a render's swap) or comes
-    // last; ';' separates several in one text; an empty text clears them.
+    // Each layer replaces the one of its name (a render's swap) or comes last.
     o.set = [](BakeOptions& b, const std::string& t) {
-      if (t.empty()) b.layers.clear();
-      for (std::size_t at = 0; at < t.size();) {
-        const std::size_t end = std::min(t.find(';', at), t.size());
-        ExemplarLayer layer = parse_layer(t.substr(at, end - at));
-        auto same = std::find_if(b.layers.begin(), b.layers.end(), [&](const ExemplarLayer& l) { return l.name == layer.name; });
-        if (same != b.layers.end())
-          *same = std::move(layer);
-        else
-          b.layers.push_back(std::move(layer));
-        at = end + 1;
-      }
+      set_named(b.layers, t, parse_layer, [](const ExemplarLayer& l) { return l.name; });
     };
     o.repeatable = true;
     o.manifest_key = "exemplar/layers";
@@ -288,17 +294,7 @@ std::vector<BakeOption> make_table() {
       return text;
     };
     o.set = [](BakeOptions& b, const std::string& t) {
-      if (t.empty()) b.layer_rules.clear();
-      for (std::size_t at = 0; at < t.size();) {
-        const std::size_t end = std::min(t.find(';', at), t.size());
-        auto rule = parse_layer_rule(t.substr(at, end - at));
-        auto same = std::find_if(b.layer_rules.begin(), b.layer_rules.end(), [&](const auto& r) { return r.first == rule.first; });
-        if (same != b.layer_rules.end())
-          *same = std::move(rule);
-        else
-          b.layer_rules.push_back(std::move(rule));
-        at = end + 1;
-      }
+      set_named(b.layer_rules, t, parse_layer_rule, [](const auto& r) { return r.first; });
     };
     o.repeatable = true;
     o.manifest_key = "layer_rules";

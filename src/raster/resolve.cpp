@@ -62,6 +62,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
     bool ok = false, same_chart = false;
     Bary bary;
     Vec2 ux, uy;  // the patch's uv per pixel step in x and y (Patch::held)
+    const LayerMaps* layer = nullptr;  // RasterContext::layer_of the patch
   };
   // Patch::held for the next frame (below, per won texel). Bits are or-ed:
   // the result does not depend on the order.
@@ -162,6 +163,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
             slot.tri = tri;
             slot.chart = atlas.chart_of_triangle[tri];
             slot.ok = winner_pixels(ctx, patch, ti, tri, P, &slot.same_chart) && slot.bary.init(P);
+            slot.layer = &ctx.layer_of(patch);
             if (slot.ok && hold) {
               // The map is affine: uv changes by ux per pixel in x, uy in y.
               const Tri& t = patch.triangles[ti];
@@ -182,7 +184,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           const double w = l0 * vertex_weight(patch, t[0]) + l1 * vertex_weight(patch, t[1]) +
                            l2 * vertex_weight(patch, t[2]);
           if (!blended && options.images) {
-            const LayerMaps& layer = ctx.layer_of(patch);
+            const LayerMaps& layer = *cur->layer;
             sample(layer.exemplar->mips, u, v, layer.lod, s, options.trilinear);
           }
           // Only a texel whose 3x3 neighbourhood lies in its chart marks

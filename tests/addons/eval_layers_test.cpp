@@ -20,17 +20,12 @@
 
 using namespace lapflow;
 using lapflow::test::TempDir;
+using lapflow::test::shipped;
+using lapflow::test::shipped_layer;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string shipped(const std::string& name, const std::string& kind) {
-  return std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/" + name + "." + kind + ".png";
-}
-
-ExemplarLayer shipped_layer(const std::string& layer, const std::string& exemplar) {
-  return {layer, shipped(exemplar, "color"), shipped(exemplar, "feature"), shipped(exemplar, "disp")};
-}
 
 /// The unit plane of write_heat_plane with heat = x over `frames` frames,
 /// baked with AOVs at 256^2: `hot` (lava) where heat > 0.5, else `calm`

@@ -20,9 +20,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string shipped(const std::string& name, const std::string& kind) {
-  return std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/" + name + "." + kind + ".png";
-}
+using test::shipped;
 
 TEST(PreviewLayers, EachTexelIsItsLayersColourShadedByItsLuminance) {
   Image color(4, 1, 4, 0.f), layers(4, 1, 1, 0.f);

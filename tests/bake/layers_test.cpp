@@ -24,17 +24,12 @@
 
 using namespace lapflow;
 using lapflow::test::TempDir;
+using lapflow::test::shipped;
+using lapflow::test::shipped_layer;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string shipped(const std::string& name, const std::string& kind) {
-  return std::string(LAPFLOW_SOURCE_DIR) + "/exemplars/" + name + "." + kind + ".png";
-}
-
-ExemplarLayer shipped_layer(const std::string& layer, const std::string& exemplar) {
-  return {layer, shipped(exemplar, "color"), shipped(exemplar, "feature"), shipped(exemplar, "disp")};
-}
 
 /// Two layers: `hot` (lava) where heat > 0.5, else `calm` (pebbles).
 BakeOptions heat_bake(const std::string& meshes, const std::string& out) {
