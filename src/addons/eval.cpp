@@ -826,13 +826,13 @@ EvalReport evaluate_bake(const std::string& dir, const EvalOptions& o,
   if (layered) {
     report.exemplar.clear();
     for (const ExemplarLayer& layer : m.options.layers) {
-      exemplars.emplace_back(read_image(exemplar_first_frame(layer.color)));
+      exemplars.emplace_back(read_image(exemplar_frame_files(layer.color).front()));
       report.layers.push_back({layer.name, layer.color, exemplar_stats(exemplars.back().original()).luminance_std});
       report.exemplar += (report.exemplar.empty() ? "" : ",") + layer.name + "=" + layer.color;
     }
     report.exemplar_luminance_std = kNoValue;
   } else {
-    exemplars.emplace_back(read_image(exemplar_first_frame(report.exemplar)));
+    exemplars.emplace_back(read_image(exemplar_frame_files(report.exemplar).front()));
     report.exemplar_luminance_std = exemplar_stats(exemplars.front().original()).luminance_std;
   }
   const auto population = read_population(m);

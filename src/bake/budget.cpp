@@ -129,12 +129,9 @@ BakeInputSizes read_bake_input_sizes(const BakeOptions& o) {
   }
   // An animated exemplar's first frame, and its frame count.
   const auto header = [](const std::string& path, std::size_t* frames = nullptr) {
-    if (!is_exemplar_sequence(path)) return read_image_header(path);
-    const FramePattern pattern(path);
-    const std::vector<int> on_disk = pattern.frames_on_disk();
-    if (on_disk.empty()) throw InputError(path, "no frame of this exemplar sequence is on disk");
-    if (frames) *frames = on_disk.size();
-    return read_image_header(pattern.path(on_disk.front()));
+    const std::vector<std::string> files = exemplar_frame_files(path);
+    if (frames) *frames = files.size();
+    return read_image_header(files.front());
   };
   if (o.layers.empty()) {
     s.color = header(o.exemplar_color, &s.frames);

@@ -170,12 +170,6 @@ std::string BakeExemplars::feature_digest() const { return joined(names, feature
 
 std::string BakeExemplars::digest() const { return joined(names, digests); }
 
-std::size_t BakeExemplars::bytes() const {
-  std::size_t n = 0;
-  for (const RasterExemplar& r : raster) n += r.bytes();
-  return n;
-}
-
 BakeExemplars load_bake_exemplars(const BakeOptions& o) {
   BakeExemplars e;
   const auto add = [&](const std::string& name, const ExemplarLayer& files) {

@@ -110,11 +110,13 @@ bool is_exemplar_sequence(const std::string& path) {
   }
 }
 
-std::string exemplar_first_frame(const std::string& path) {
-  if (!is_exemplar_sequence(path)) return path;
+std::vector<std::string> exemplar_frame_files(const std::string& path) {
+  if (!is_exemplar_sequence(path)) return {path};
   const FramePattern pattern(path);
-  const std::vector<int> frames = pattern.frames_on_disk();
-  return frames.empty() ? path : pattern.path(frames.front());
+  std::vector<std::string> files;
+  for (int f : pattern.frames_on_disk()) files.push_back(pattern.path(f));
+  if (files.empty()) throw InputError(path, "no frame of this animated exemplar is on disk");
+  return files;
 }
 
 std::vector<Exemplar> load_exemplar_frames(const std::string& color_path, const std::string& feature_path,
@@ -122,7 +124,7 @@ std::vector<Exemplar> load_exemplar_frames(const std::string& color_path, const 
   if (!is_exemplar_sequence(color_path)) return {load_exemplar(color_path, feature_path, displacement_path)};
   const FramePattern color(color_path);
   const std::vector<int> frames = color.frames_on_disk();
-  if (frames.empty()) throw InputError(color_path, "no frame of this exemplar sequence is on disk");
+  if (frames.empty()) throw InputError(color_path, "no frame of this animated exemplar is on disk");
   if (frames.size() > kMaxExemplarFrames)
     throw InputError(color_path, fmt::format("{} frames; an animated exemplar has at most {}", frames.size(),
                                              kMaxExemplarFrames));

@@ -192,11 +192,12 @@ void bind_rest_ground(RasterContext& ctx, const PatchSet& patches) {
 
 // The draw's test with the hold at (u, v, w) of patch triangle t, as if
 // (u, v) were held (passes).
-bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w) {
+bool held_test_keeps(const RasterContext& ctx, const LayerMaps& layer, const Patch& patch, const Tri& t, double u,
+                     double v, double w) {
   const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
   const float wv[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
   const double r = ctx.held_reach;
-  return keeps_held(ctx.layer_of(patch).held_erosion(), r, ctx.options.hold_margin, u, v,
+  return keeps_held(layer.held_erosion(), r, ctx.options.hold_margin, u, v,
                     std::min(1.0, w + weight_slope(uv, wv) * r));
 }
 

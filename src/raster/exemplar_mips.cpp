@@ -91,13 +91,6 @@ RasterExemplar prepare_raster_exemplar(std::span<const Exemplar> frames, double 
   return r;
 }
 
-std::size_t RasterExemplar::bytes() const {
-  std::size_t n = erosion.feature.pixels.size() * sizeof(float);
-  for (const Image& level : mips.levels) n += level.pixels.size() * sizeof(float);
-  for (const RasterExemplar& f : later) n += f.bytes();
-  return n;
-}
-
 int ExemplarClock::frame_of(const Patch& patch, int count) const {
   if (count <= 1) return 0;
   const double age = double(frame) - double(patch.birth_frame);

@@ -336,7 +336,8 @@ struct Bary {
 /// Only such texels mark held cells (resolve_texels).
 bool interior_texel(const RasterContext& ctx, std::size_t i, int x, int y);
 /// The draw's test with the hold at (u, v, w) of patch triangle t, as if
-/// (u, v) were held.
-bool held_test_keeps(const RasterContext& ctx, const Patch& patch, const Tri& t, double u, double v, double w);
+/// (u, v) were held; `layer` is the patch's (RasterContext::layer_of).
+bool held_test_keeps(const RasterContext& ctx, const LayerMaps& layer, const Patch& patch, const Tri& t, double u,
+                     double v, double w);
 
 }  // namespace lapflow::detail

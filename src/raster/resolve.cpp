@@ -199,7 +199,7 @@ FrameTextures resolve_texels(RasterBuffers& r, const PatchSet& patches) {
           // change of a surface at rest.
           if (hold && (ctx.extrapolated.empty() || !ctx.extrapolated[i] ||
                        (patch.at_rest && !ctx.closed.empty() && ctx.closed[i] &&
-                        !held_test_keeps(ctx, patch, t, u, v, w))) &&
+                        !held_test_keeps(ctx, *cur->layer, patch, t, u, v, w))) &&
               interior_texel(ctx, i, x, y))
             mark_held(p, u, v, cur->ux, cur->uy);
           aov[0] = float(patch.id), aov[1] = float(u), aov[2] = float(v), aov[3] = float(w), aov[4] = float(patch.layer);

@@ -169,8 +169,7 @@ void resolve_exemplar_paths(std::string& color, std::string& feature, std::strin
   }
   if (fs::is_directory(color)) color = sequence_in_folder(color);
   if (is_exemplar_sequence(color)) {
-    if (FramePattern(color).frames_on_disk().empty())
-      throw InputError(color, "no frame of this animated exemplar is on disk");
+    exemplar_frame_files(color);  // throws when no frame is on disk
     if (feature.empty()) {
       feature = sibling_sequence(color, "feature");
       if (feature.empty())

@@ -111,8 +111,6 @@ struct BakeExemplars {
   std::string feature_digest() const;
   /// exemplar_digest of each layer, joined the same way.
   std::string digest() const;
-  /// Bytes of every layer's prepared frames (RasterExemplar::bytes).
-  std::size_t bytes() const;
 };
 
 /// Loads the exemplar of every layer (BakeOptions::layers, else the

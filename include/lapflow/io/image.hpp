@@ -172,9 +172,10 @@ inline constexpr std::size_t kMaxExemplarFrames = 1000;
 /// (`lava.color.%04d.png`, `lava.color.####.png`, `$F4`) that is not itself
 /// a file.
 bool is_exemplar_sequence(const std::string& path);
-/// The file of an animated exemplar's first frame on disk (`path` itself
-/// for one image, or when no frame is on disk).
-std::string exemplar_first_frame(const std::string& path);
+/// The files of an animated exemplar's frames on disk, in order (`path`
+/// alone for one image). Throws InputError naming a pattern with no frame
+/// on disk.
+std::vector<std::string> exemplar_frame_files(const std::string& path);
 
 /// An animated exemplar's frames (docs/layers.md, "Animated exemplars"), or
 /// the one frame of a still one. `color_path` is a frame pattern whose

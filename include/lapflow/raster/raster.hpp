@@ -171,8 +171,6 @@ struct RasterExemplar {
 
   std::size_t frame_count() const { return 1 + later.size(); }
   const RasterExemplar& frame(std::size_t k) const { return k == 0 ? *this : later[k - 1]; }
-  /// Bytes held by the mips and erosion map of every frame (not the tables).
-  std::size_t bytes() const;
 };
 
 /// The exemplars of a bake's layers, indexed by Patch::layer: one in a bake
