@@ -257,6 +257,20 @@ bool pixels_through(const RasterContext& ctx, const Patch& patch, const Tri& t, 
   return true;
 }
 
+// The atlas pixels fluid triangle F's texels can lie in: the box of its
+// corners, widened to whole pixels and clamped to the atlas; false when empty.
+bool fluid_triangle_box(const RasterContext& ctx, int F, int& x0, int& y0, int& x1, int& y1) {
+  const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(F) * 3];
+  double fx0 = 1e300, fx1 = -1e300, fy0 = 1e300, fy1 = -1e300;
+  for (int k = 0; k < 3; ++k) {
+    const double X = cu[k].x * ctx.N - 0.5, Y = (1.0 - cu[k].y) * ctx.N - 0.5;
+    fx0 = std::min(fx0, X), fx1 = std::max(fx1, X), fy0 = std::min(fy0, Y), fy1 = std::max(fy1, Y);
+  }
+  x0 = std::max(0, int(std::floor(fx0))), x1 = std::min(ctx.N - 1, int(std::ceil(fx1)));
+  y0 = std::max(0, int(std::floor(fy0))), y1 = std::min(ctx.N - 1, int(std::ceil(fy1)));
+  return x0 <= x1 && y0 <= y1;
+}
+
 struct PatchTriGeometry {
   Vec3 centre, normal;
   double radius = 0, margin = 0;
@@ -290,6 +304,7 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
   const Tri& t = patch.triangles[ti];
   const PatchTriGeometry g = patch_tri_geometry(patch, t);
   if (norm2(g.normal) == 0) return;
+  if (clip && !clip->walk_may_write(ctx, vtri, g.centre, g.radius, g.margin)) return;
   // Triangles looked at, found or not, in a per-thread set: a linear search
   // of `found` would make the walk quadratic, and a patch stretched over the
   // whole liquid (--mode advect) walks the 4096 triangles of the guard for
@@ -319,15 +334,8 @@ void draw_seam_triangle(RasterContext& ctx, Sink& sink, const Patch& patch, int 
     if (ctx.atlas.chart_of_triangle[F] == exclude_chart) continue;  // drawn in-chart already
     Vec2 P[3];
     if (!pixels_through(ctx, patch, t, F, P)) continue;
-    const Vec2* cu = &ctx.atlas.corner_uv[std::size_t(F) * 3];
-    double fx0 = 1e300, fx1 = -1e300, fy0 = 1e300, fy1 = -1e300;
-    for (int k = 0; k < 3; ++k) {
-      const double X = cu[k].x * ctx.N - 0.5, Y = (1.0 - cu[k].y) * ctx.N - 0.5;
-      fx0 = std::min(fx0, X), fx1 = std::max(fx1, X), fy0 = std::min(fy0, Y), fy1 = std::max(fy1, Y);
-    }
-    const int cx0 = std::max(0, int(std::floor(fx0))), cx1 = std::min(ctx.N - 1, int(std::ceil(fx1)));
-    const int cy0 = std::max(0, int(std::floor(fy0))), cy1 = std::min(ctx.N - 1, int(std::ceil(fy1)));
-    if (cx0 > cx1 || cy0 > cy1) continue;
+    int cx0, cy0, cx1, cy1;
+    if (!fluid_triangle_box(ctx, F, cx0, cy0, cx1, cy1)) continue;
     if (clip && !clip->any(cx0, cy0, cx1, cy1)) continue;  // every write lands in F's box
     const Vec2 uv[3] = {patch.rest_uv[t[0]], patch.rest_uv[t[1]], patch.rest_uv[t[2]]};
     const float w[3] = {vertex_weight(patch, t[0]), vertex_weight(patch, t[1]), vertex_weight(patch, t[2])};
@@ -360,6 +368,72 @@ static bool seam_vertex_near(const RasterContext& ctx, const Vec3& c, double rad
         auto it = std::lower_bound(ctx.seam_grid.begin(), ctx.seam_grid.end(), std::make_pair(key, int32_t(-1)));
         for (; it != ctx.seam_grid.end() && it->first == key; ++it)
           if (norm2(ctx.mesh.positions[it->second] - c) <= radius * radius) return true;
+      }
+  return false;
+}
+
+namespace {
+
+// Grid cells of side h that box [c - r, c + r] touches, as (x, y, z)
+// ranges; false when they are more than `limit`.
+bool cell_range(const Vec3& c, double r, double h, int64_t lo[3], int64_t hi[3], int64_t limit) {
+  const double p[3] = {c.x, c.y, c.z};
+  int64_t count = 1;
+  for (int a = 0; a < 3; ++a) {
+    const double l = std::floor((p[a] - r) / h), u = std::floor((p[a] + r) / h);
+    if (!(u - l < double(limit))) return false;
+    lo[a] = int64_t(l), hi[a] = int64_t(u);
+    count *= hi[a] - lo[a] + 1;
+    if (count > limit) return false;
+  }
+  return true;
+}
+
+// Room for rounding in the cell ranges (they only need to overlap).
+inline double widened(double r) { return r * (1 + 1e-9) + 1e-12; }
+
+}  // namespace
+
+void TileMask::set_writable(const RasterContext& ctx, std::vector<uint8_t> writable) {
+  writable_ = std::move(writable);
+  cell_ = ctx.seam_cell;
+  spheres_.clear();
+  everywhere_ = false;
+  constexpr int64_t kMaxCells = 512;
+  for (std::size_t F = 0; F < writable_.size() && !everywhere_; ++F) {
+    if (!writable_[F]) continue;
+    const RasterContext::Sphere& s = ctx.tri_sphere[F];
+    int64_t lo[3], hi[3];
+    if (!cell_range(s.centre, widened(s.radius), cell_, lo, hi, kMaxCells)) {
+      everywhere_ = true;
+      break;
+    }
+    for (int64_t z = lo[2]; z <= hi[2]; ++z)
+      for (int64_t y = lo[1]; y <= hi[1]; ++y)
+        for (int64_t x = lo[0]; x <= hi[0]; ++x)
+          spheres_.push_back({hash64(uint64_t(x), uint64_t(y), uint64_t(z)), int32_t(F)});
+  }
+  std::sort(spheres_.begin(), spheres_.end());
+}
+
+bool TileMask::walk_may_write(const RasterContext& ctx, const int start[3], const Vec3& centre, double radius,
+                              double margin) const {
+  if (everywhere_ || writable_.empty()) return true;  // not told: walk
+  for (int k = 0; k < 3; ++k)
+    if (start[k] >= 0 && writable_[std::size_t(start[k])]) return true;
+  if (spheres_.empty()) return false;
+  int64_t lo[3], hi[3];
+  if (!cell_range(centre, widened(radius + margin), cell_, lo, hi, 4096)) return true;
+  for (int64_t z = lo[2]; z <= hi[2]; ++z)
+    for (int64_t y = lo[1]; y <= hi[1]; ++y)
+      for (int64_t x = lo[0]; x <= hi[0]; ++x) {
+        const uint64_t key = hash64(uint64_t(x), uint64_t(y), uint64_t(z));
+        for (auto it = std::lower_bound(spheres_.begin(), spheres_.end(), std::make_pair(key, int32_t(-1)));
+             it != spheres_.end() && it->first == key; ++it) {
+          const RasterContext::Sphere& s = ctx.tri_sphere[std::size_t(it->second)];
+          // The walk's own test, to the bit.
+          if (!(norm(s.centre - centre) > radius + s.radius + margin)) return true;
+        }
       }
   return false;
 }
@@ -680,7 +754,14 @@ void rasterize_patch_into(RasterContext& ctx, Sink& sink, const Patch& patch, st
       // seam could then cross it away from them).
       ct.ring = near || area2 > 4 * std::min({ctx.tri_area2_px[vtri[t[0]]], ctx.tri_area2_px[vtri[t[1]]],
                                               ctx.tri_area2_px[vtri[t[2]]]});
-      if (clip && !ct.ring && !clip->any(ct.x0 - 1, ct.y0 - 1, ct.x1 + 1, ct.y1 + 1)) continue;
+      if (clip && !clip->any(ct.x0 - 1, ct.y0 - 1, ct.x1 + 1, ct.y1 + 1)) {
+        if (!ct.ring) continue;
+        // Its pixels miss every marked tile: only the fallback could write,
+        // and not when its walk cannot find a writable triangle.
+        const PatchTriGeometry g = patch_tri_geometry(patch, t);
+        const int vt[3] = {vtri[t[0]], vtri[t[1]], vtri[t[2]]};
+        if (!clip->walk_may_write(ctx, vt, g.centre, g.radius, g.margin)) continue;
+      }
       bool crosses = false;
       if (tiny && near) {
         const PatchTriGeometry g = patch_tri_geometry(patch, t);

@@ -57,16 +57,20 @@ std::vector<uint8_t> covered_small_patches(RasterContext& ctx, const PatchSet& p
                                   int64_t(std::floor(x.z / cell))};
   };
   std::vector<uint64_t> cells;
+  // Only the candidates' texels take a key, through the fluid triangles that own them.
+  std::vector<uint8_t> writable(ctx.mesh.triangles.size(), 0);
   for (std::size_t i = 0; i < tm.size(); ++i) {
     const uint64_t key = ctx.keys[i];
     if (key == kNoKey || !candidate[key >> 32]) continue;
     alt[i] = kNoKey;
+    writable[std::size_t(tm.triangle[i])] = 1;
     clip.mark(int(tm.texel[i] % uint32_t(ctx.N)), int(tm.texel[i] / uint32_t(ctx.N)));
     const auto c = cell_of(texel_position(ctx, i));
     cells.push_back(hash64(uint64_t(c[0]), uint64_t(c[1]), uint64_t(c[2])));
   }
   std::sort(cells.begin(), cells.end());
   cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  clip.set_writable(ctx, std::move(writable));
   auto near = [&](const Patch& patch) {
     // Patch vertices lie within about r of its centre: look a cell around.
     // A patch stretched farther is not drawn, which can only keep a

@@ -52,6 +52,22 @@ struct TileMask {
   bool any(int x0, int y0, int x1, int y1) const {
     return grid.any_tile(x0, y0, x1, y1, [&](std::size_t t) { return marked[t] != 0; });
   }
+
+  // The seam fallback writes a texel only through the fluid triangle that
+  // owns it, and its walk finds only its start triangles and triangles whose
+  // bounding spheres pass its distance test. Given the fluid triangles that
+  // own a texel the draw can write (`writable`, per triangle),
+  // walk_may_write() tells whether the walk can find any of them: when not,
+  // the walk is skipped, with the same writes.
+  void set_writable(const RasterContext& ctx, std::vector<uint8_t> writable);
+  bool walk_may_write(const RasterContext& ctx, const int start[3], const Vec3& centre, double radius,
+                      double margin) const;
+
+ private:
+  std::vector<uint8_t> writable_;                        // per fluid triangle
+  std::vector<std::pair<uint64_t, int32_t>> spheres_;    // those triangles by the grid cells their spheres touch
+  double cell_ = 1;
+  bool everywhere_ = false;                              // a sphere too large to bucket: always walk
 };
 
 // Tiles of 8 x 8 atlas pixels that older patches already keep, so that a

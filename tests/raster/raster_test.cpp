@@ -14,6 +14,7 @@
 #include "lapflow/raster/raster.hpp"
 #include "raster/raster_fixture.hpp"
 #include "raster/internal.hpp"
+#include "raster/tiles.hpp"
 #include "raster/sampling.hpp"
 
 namespace lapflow {
@@ -975,6 +976,43 @@ TEST(Raster, MergeRetiresASmallPatchWhoseTexelsAnotherKeeps) {
   EXPECT_EQ(f1.stats.texels_per_patch[0], p0.stats.texels_per_patch[0]);
   EXPECT_EQ(f1.stats.texels_per_patch[1], p0.stats.texels_per_patch[2] + crescent);
   EXPECT_EQ(f1.stats.retired_merged, 0u);
+}
+
+TEST(Raster, MergeWalkSkipIsExactlyTheWalksDistanceTest) {
+  // The merge test's second draw skips a seam walk when no fluid triangle
+  // owning a writable texel can pass the walk's distance test: it must say
+  // "may write" exactly when a brute-force search over those triangles
+  // finds one (or a start triangle is one), or a merge would change.
+  Scene sc = ramp_plane(256, 48, 0.1);
+  sc.f = test::make_plane(32, 1.0, 256, true);
+  RasterOptions o;
+  o.radius = sc.r;
+  RasterBuffers r = begin_raster(sc.f.mesh, sc.f.atlas, sc.rex, o, WeightOptions{});
+  const detail::RasterContext& ctx = *r.context;
+  const std::size_t nt = sc.f.mesh.triangles.size();
+  ASSERT_GE(nt, 2048u);
+  std::size_t yes = 0, no = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<uint8_t> writable(nt, 0);
+    const double share = 0.002 + 0.05 * hash_to_unit(hash64(31, trial));
+    for (std::size_t F = 0; F < nt; ++F) writable[F] = hash_to_unit(hash64(32, trial, F)) < share;
+    detail::TileMask mask(ctx.N);
+    mask.set_writable(ctx, writable);
+    for (int k = 0; k < 300; ++k) {
+      auto h = [&](int j) { return hash_to_unit(hash64(33, trial, k, j)); };
+      const Vec3 c{1.2 * h(0) - 0.1, 1.2 * h(1) - 0.1, 0.05 * (h(2) - 0.5)};
+      const double radius = 0.5 * sc.r * h(3) * h(4), margin = 0.05 * sc.r * h(5);
+      const int start[3] = {int(h(6) * double(nt)), h(7) < 0.2 ? -1 : int(h(8) * double(nt)), -1};
+      bool expected = false;
+      for (int s : start) expected = expected || (s >= 0 && writable[std::size_t(s)]);
+      for (std::size_t F = 0; F < nt && !expected; ++F)
+        expected = writable[F] && !(norm(ctx.tri_sphere[F].centre - c) > radius + ctx.tri_sphere[F].radius + margin);
+      ASSERT_EQ(mask.walk_may_write(ctx, start, c, radius, margin), expected) << "trial " << trial << " sphere " << k;
+      ++(expected ? yes : no);
+    }
+  }
+  EXPECT_GT(yes, 500u);
+  EXPECT_GT(no, 500u);
 }
 
 }  // namespace
