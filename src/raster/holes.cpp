@@ -11,6 +11,7 @@
 // a texel an older patch keeps). Repeat until no hole is left.
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <cmath>
@@ -98,21 +99,21 @@ class HoleDepth {
       : ctx_(ctx), members_(members), label_(label), id_(id), reached_mark_(-3 - id) {
     for (uint32_t i : members) {
       bool rim = false;
-      for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (label[n] != id && ctx.keys[n] != kNoKey); });
+      for_each_neighbour(ctx, i, [&](uint32_t n) { rim = rim || (load(label, n) != id && ctx.keys[n] != kNoKey); });
       if (rim) layer_.push_back(i);
     }
     rim_ = layer_;
     if (layer_.empty())
       for (uint32_t i : members) {
         int inside = 0;  // neighbours in the hole
-        for_each_neighbour(ctx, i, [&](uint32_t n) { inside += label[n] == id; });
+        for_each_neighbour(ctx, i, [&](uint32_t n) { inside += load(label, n) == id; });
         if (inside < 8) layer_.push_back(i);
       }
-    for (uint32_t i : layer_) label[i] = reached_mark_;
+    for (uint32_t i : layer_) store(label, i, reached_mark_);
     reached_ = layer_.size();
   }
   ~HoleDepth() {
-    for (uint32_t i : members_) label_[i] = id_;
+    for (uint32_t i : members_) store(label_, i, id_);
   }
   HoleDepth(const HoleDepth&) = delete;
   HoleDepth& operator=(const HoleDepth&) = delete;
@@ -127,8 +128,8 @@ class HoleDepth {
       next_.clear();
       for (uint32_t i : layer_)
         for_each_neighbour(ctx_, i, [&](uint32_t n) {
-          if (label_[n] != id_) return;  // not in the hole, or reached
-          label_[n] = reached_mark_;
+          if (load(label_, n) != id_) return;  // not in the hole, or reached
+          store(label_, n, reached_mark_);
           next_.push_back(n);
         });
       reached_ += next_.size();
@@ -139,6 +140,15 @@ class HoleDepth {
   }
 
  private:
+  // Holes are measured in parallel: another hole's walk may be rewriting the
+  // label of a neighbour of this one (never to this hole's id or mark).
+  static int32_t load(std::vector<int32_t>& label, uint32_t i) {
+    return std::atomic_ref<int32_t>(label[i]).load(std::memory_order_relaxed);
+  }
+  static void store(std::vector<int32_t>& label, uint32_t i, int32_t v) {
+    std::atomic_ref<int32_t>(label[i]).store(v, std::memory_order_relaxed);
+  }
+
   const RasterContext& ctx_;
   const std::vector<uint32_t>& members_;
   std::vector<int32_t>& label_;
@@ -197,81 +207,93 @@ std::size_t create_hole_patches(RasterContext& ctx, PatchSet& patches, int frame
     }
     for (uint32_t i : open) label[i] = -2;  // open, not yet labelled
 
-    // Holes in texel order of their first texel; seeds in hole order.
-    std::vector<uint32_t> seeds;
-    SpacedPoints grid(spacing, mesh_box);
-    std::vector<uint32_t> members;
-    int32_t holes = 0;
+    // Holes in texel order of their first texel (a serial flood fill), each
+    // measured and given its seed candidates on its own (in parallel), then
+    // seeds in hole order.
+    struct Hole {
+      std::vector<uint32_t> members;
+      double sx = 0, sy = 0;
+      int chart = 0;
+      bool closed = false;
+      std::vector<Vec3> at;  // the centre's surface point, then the members' in texel order
+      uint32_t centre = 0;
+    };
+    std::vector<Hole> found;
     for (uint32_t start : open) {
       if (label[start] != -2) continue;
-      const int chart = ctx.atlas.chart_of_triangle[tm.triangle[start]];
-      members.clear();
+      Hole& h = found.emplace_back();
+      h.chart = ctx.atlas.chart_of_triangle[tm.triangle[start]];
+      const int32_t id = int32_t(found.size() - 1);
       queue.assign(1, start);
-      label[start] = holes;
-      double sx = 0, sy = 0;
+      label[start] = id;
       for (std::size_t q = 0; q < queue.size(); ++q) {
         const uint32_t i = queue[q];
-        members.push_back(i);
+        h.members.push_back(i);
         const int x = int(tm.texel[i] % uint32_t(N)), y = int(tm.texel[i] / uint32_t(N));
-        sx += x, sy += y;
+        h.sx += x, h.sy += y;
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
             const int xx = x + dx, yy = y + dy;
             if (xx < 0 || yy < 0 || xx >= N || yy >= N) continue;
             const int32_t n = ctx.index[std::size_t(yy) * N + xx];
-            if (n < 0 || label[n] != -2 || ctx.atlas.chart_of_triangle[tm.triangle[n]] != chart) continue;
-            label[n] = holes;
+            if (n < 0 || label[n] != -2 || ctx.atlas.chart_of_triangle[tm.triangle[n]] != h.chart) continue;
+            label[n] = id;
             queue.push_back(uint32_t(n));
           }
       }
-      ++holes;
-      // A hole no wider than RasterOptions::small_hole x r is closed by the
-      // patches around it (propagate_keys) instead of a new patch:
-      // re-meshing alone opens holes of a texel or two at the patches' eroded
-      // edges every frame, and slivers along a slowly spreading rim, and a
-      // full patch born for each would churn the texture and grow the
-      // population without bound. A hole that is its whole chart has no
-      // neighbour to close it and always gets a patch.
-      // A still liquid that spreads slowly (below --min-speed) uncovers a
-      // strip at its rim a texel or so a frame, which outgrows small_hole in
-      // a few frames: where only patches at rest hold its rim, the strip is
-      // continued by them up to rest_hole x r (RasterOptions::rest_hole).
-      // The deeper walk only for a rim at rest: most holes are next to moving
-      // patches, and a walk to rest_hole's depth costs up to 8x more layers.
-      if (measure && members.size() < chart_texels[chart]) {
-        bool close;
-        {
-          HoleDepth depth(ctx, members, label, holes - 1);
-          close = depth.within(max_closed_depth) <= max_closed_depth;
-          if (!close && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, depth.rim()))
-            close = depth.within(max_rest_depth) <= max_rest_depth;
+    }
+    parallel_for(found.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t k = b; k < e; ++k) {
+        Hole& h = found[k];
+        // A hole no wider than RasterOptions::small_hole x r is closed by the
+        // patches around it (propagate_keys) instead of a new patch:
+        // re-meshing alone opens holes of a texel or two at the patches' eroded
+        // edges every frame, and slivers along a slowly spreading rim, and a
+        // full patch born for each would churn the texture and grow the
+        // population without bound. A hole that is its whole chart has no
+        // neighbour to close it and always gets a patch.
+        // A still liquid that spreads slowly (below --min-speed) uncovers a
+        // strip at its rim a texel or so a frame, which outgrows small_hole in
+        // a few frames: where only patches at rest hold its rim, the strip is
+        // continued by them up to rest_hole x r (RasterOptions::rest_hole).
+        // The deeper walk only for a rim at rest: most holes are next to moving
+        // patches, and a walk to rest_hole's depth costs up to 8x more layers.
+        // Holes are disjoint: each walk marks and reads only its own members'
+        // labels as its own (another hole's are never its id or its mark).
+        if (measure && h.members.size() < chart_texels[std::size_t(h.chart)]) {
+          HoleDepth depth(ctx, h.members, label, int32_t(k));
+          h.closed = depth.within(max_closed_depth) <= max_closed_depth;
+          if (!h.closed && max_rest_depth > max_closed_depth && rim_at_rest(ctx, patches, depth.rim()))
+            h.closed = depth.within(max_rest_depth) <= max_rest_depth;
+          if (h.closed) continue;
         }
-        if (close) {
-          for (uint32_t i : members) closed_texel[i] = 1;
-          closed += members.size();
-          continue;
+        // The member nearest the centroid (ties: lowest texel index), then, for
+        // holes wider than one patch, members in texel order 2r apart.
+        std::sort(h.members.begin(), h.members.end());
+        const double cx = h.sx / double(h.members.size()), cy = h.sy / double(h.members.size());
+        h.centre = h.members[0];
+        double best = INFINITY;
+        for (uint32_t i : h.members) {
+          const double dx = double(tm.texel[i] % uint32_t(N)) - cx, dy = double(tm.texel[i] / uint32_t(N)) - cy;
+          if (dx * dx + dy * dy < best) best = dx * dx + dy * dy, h.centre = i;
         }
+        h.at.reserve(h.members.size() + 1);
+        h.at.push_back(texel_position(ctx, h.centre));
+        for (uint32_t i : h.members) h.at.push_back(texel_position(ctx, i));
       }
-      // The member nearest the centroid (ties: lowest texel index), then, for
-      // holes wider than one patch, members in texel order 2r apart.
-      std::sort(members.begin(), members.end());
-      const double cx = sx / double(members.size()), cy = sy / double(members.size());
-      uint32_t centre = members[0];
-      double best = INFINITY;
-      for (uint32_t i : members) {
-        const double dx = double(tm.texel[i] % uint32_t(N)) - cx, dy = double(tm.texel[i] / uint32_t(N)) - cy;
-        if (dx * dx + dy * dy < best) best = dx * dx + dy * dy, centre = i;
+    }, 1);
+    std::vector<uint32_t> seeds;
+    SpacedPoints grid(spacing, mesh_box);
+    for (const Hole& h : found) {
+      if (h.closed) {
+        for (uint32_t i : h.members) closed_texel[i] = 1;
+        closed += h.members.size();
+        continue;
       }
-      const Vec3 pc = texel_surface_point(ctx, centre).position;
-      if (grid.free(pc)) {
-        grid.add(pc);
-        seeds.push_back(centre);
-      }
-      for (uint32_t i : members) {
-        const Vec3 p = texel_surface_point(ctx, i).position;
-        if (!grid.free(p)) continue;
-        grid.add(p);
-        seeds.push_back(i);
+      for (std::size_t k = 0; k < h.at.size(); ++k) {
+        if (!grid.free(h.at[k])) continue;
+        grid.add(h.at[k]);
+        seeds.push_back(k == 0 ? h.centre : h.members[k - 1]);
       }
     }
     for (uint32_t i : open) label[i] = -1;
